@@ -1,12 +1,24 @@
 """volspring: volumetric soft bodies as tetrahedral mass-spring models, checked against FEM."""
 
+from volspring.material import Material
 from volspring.mesh import TetMesh
+from volspring.model import FORCE_LAWS, STIFFNESS_RULES, SpringModel
+from volspring.scene import Drag, Gravity, Pins, Scene, State
 from volspring.topology import SPRING_KINDS, SpringTopology
 
 __version__ = "0.1.0"
 
 __all__ = [
+    "Drag",
+    "FORCE_LAWS",
+    "Gravity",
+    "Material",
+    "Pins",
     "SPRING_KINDS",
+    "STIFFNESS_RULES",
+    "Scene",
+    "SpringModel",
     "SpringTopology",
+    "State",
     "TetMesh",
 ]

@@ -1,0 +1,129 @@
+"""Material, spring model construction, spring forces and their Jacobians."""
+
+import numpy as np
+import pytest
+
+from volspring import Material, SpringModel, SpringTopology
+from volspring.springs import damper_blocks, spring_energy, spring_forces, spring_stiffness_blocks
+
+from conftest import cube_mesh
+
+STEEL_LIKE = Material(E=2e5, nu=0.3, density=1000.0)
+
+
+@pytest.mark.parametrize("E, nu, density, message", [
+    (0.0, 0.3, 1.0, "E = 0.0"), (1.0, 0.5, 1.0, "nu = 0.5"), (1.0, -1.0, 1.0, "nu = -1.0"),
+    (1.0, 0.3, -2.0, "density = -2.0"), (float("nan"), 0.3, 1.0, "E = nan"),
+])
+def test_material_refuses_nonsense(E, nu, density, message):
+    with pytest.raises(ValueError, match=message):
+        Material(E=E, nu=nu, density=density)
+
+
+def test_masses_are_density_times_volume():
+    mesh = cube_mesh((3, 2, 2), size=(0.3, 0.1, 0.1))
+    model = SpringModel.from_mesh(mesh, STEEL_LIKE)
+    # Lumping only redistributes: total mass is rho V up to round-off.
+    assert model.total_mass == pytest.approx(STEEL_LIKE.density * mesh.volume, rel=1e-12)
+    assert model.spring_count == len(mesh.edges)
+
+
+def test_single_tet_rules_match_their_formulas():
+    points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    mesh = cube_mesh((1, 1, 1)).__class__(points, np.array([[0, 1, 2, 3]]))
+    volume = 1 / 6
+    van_gelder = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="van_gelder")
+    assert np.allclose(van_gelder.stiffness, STEEL_LIKE.E * volume / mesh.edge_lengths**2, rtol=1e-14)
+    lloyd = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="lloyd")
+    expected = 2 * np.sqrt(2) / 25 * STEEL_LIKE.E * (6 * np.sqrt(2) * volume) ** (1 / 3)
+    assert np.allclose(lloyd.stiffness, expected, rtol=1e-14)
+    uniform = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=7.0, law="strain")
+    assert np.allclose(uniform.stiffness, 7.0 / mesh.edge_lengths, rtol=1e-14)
+
+
+def test_interior_edge_sums_over_its_tets():
+    mesh = cube_mesh((2, 2, 2))
+    model = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="van_gelder")
+    # Rebuild k_e by an explicit loop over tets: the vectorised scatter must agree.
+    expected = np.zeros(len(mesh.edges))
+    for tet, edge_ids in zip(range(mesh.tet_count), mesh.tet_edge_index):
+        expected[edge_ids] += STEEL_LIKE.E * mesh.tet_volumes[tet] / mesh.edge_lengths[edge_ids] ** 2
+    assert np.allclose(model.stiffness, expected, rtol=1e-13)
+
+
+def test_rule_and_stiffness_are_checked():
+    mesh = cube_mesh((1, 1, 1))
+    with pytest.raises(ValueError, match="unknown stiffness rule"):
+        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="magic")
+    with pytest.raises(ValueError, match="required by rule='uniform'"):
+        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform")
+    with pytest.raises(ValueError, match=r"stiffness\[1\] = -1.0"):
+        SpringModel.from_arrays(np.eye(3), np.ones(3), [[0, 1], [1, 2]], stiffness=[1.0, -1.0])
+    with pytest.raises(ValueError, match=r"masses\[0\] = 0.0"):
+        SpringModel.from_arrays(np.eye(3), [0.0, 1, 1], [[0, 1]], stiffness=1.0)
+
+
+def test_damping_ratio_gives_critical_damping_for_one_spring():
+    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [2.0, 2.0], [[0, 1]], stiffness=50.0)
+    topology = SpringTopology.from_mesh(cube_mesh((1, 1, 1)))
+    damped = SpringModel.from_mesh(topology, STEEL_LIKE, damping_ratio=1.0)
+    m_i, m_j = damped.masses[damped.springs].T
+    assert np.allclose(damped.damping, 2 * np.sqrt(damped.stiffness * m_i * m_j / (m_i + m_j)), rtol=1e-14)
+    assert model.damping[0] == 0.0
+
+
+def _random_state(model, seed, amplitude=0.05):
+    rng = np.random.default_rng(seed)
+    x = model.rest_positions + amplitude * rng.standard_normal(model.rest_positions.shape)
+    v = rng.standard_normal(x.shape)
+    return x, v
+
+
+def test_forces_conserve_momentum_and_derive_from_energy():
+    mesh = cube_mesh((2, 1, 1))
+    model = SpringModel.from_mesh(mesh, STEEL_LIKE, damping_ratio=0.3)
+    x, v = _random_state(model, 0)
+    forces = spring_forces(model, x, v)
+    # Internal forces sum to zero: only round-off of the force magnitudes (~1e-16 relative) remains.
+    assert np.abs(forces.sum(axis=0)).max() <= 1e-12 * np.abs(forces).max()
+    # Torque too, for springs (central forces) without dampers.
+    f = spring_forces(model, x)
+    assert np.abs(np.cross(x, f).sum(axis=0)).max() <= 1e-12 * np.abs(np.cross(x, f)).max()
+    # F = -grad E, central differences: error O(h^2) ~ 1e-12 relative at h = 1e-6.
+    h, node = 1e-6, 3
+    for axis in range(3):
+        plus, minus = x.copy(), x.copy()
+        plus[node, axis] += h
+        minus[node, axis] -= h
+        gradient = (spring_energy(model, plus) - spring_energy(model, minus)) / (2 * h)
+        assert -gradient == pytest.approx(f[node, axis], rel=1e-6)
+
+
+def test_jacobian_blocks_match_finite_differences():
+    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=30.0, damping=2.0)
+    x = np.array([[0.0, 0, 0], [1.3, 0.2, -0.1]])  # stretched: the transverse term is positive, no clamp
+    v = np.array([[0.1, 0.0, 0.3], [-0.2, 0.5, 0.0]])
+    H = spring_stiffness_blocks(model, x)[0]
+    D = damper_blocks(model, x)[0]
+    h = 1e-7
+    for axis in range(3):
+        dx = np.zeros_like(x)
+        dx[1, axis] = h
+        # dF_i/dx_j = +H (column axis); central difference error O(h^2), relative 1e-6 is generous.
+        dF = (spring_forces(model, x + dx) - spring_forces(model, x - dx))[0] / (2 * h)
+        assert np.allclose(dF, H[:, axis], rtol=1e-6, atol=1e-8 * np.abs(H).max())
+        dF = (spring_forces(model, x, v + dx) - spring_forces(model, x, v - dx))[0] / (2 * h)
+        assert np.allclose(dF, D[:, axis], rtol=1e-6, atol=1e-8 * np.abs(D).max())
+
+
+def test_compressed_spring_block_is_clamped_positive_semidefinite():
+    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=30.0)
+    x = np.array([[0.0, 0, 0], [0.5, 0.1, 0]])
+    assert np.linalg.eigvalsh(spring_stiffness_blocks(model, x)[0]).min() >= -1e-12
+    assert np.linalg.eigvalsh(spring_stiffness_blocks(model, x, clamp_compression=False)[0]).min() < 0
+
+
+def test_collapsed_spring_is_an_error_not_nan():
+    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0)
+    with pytest.raises(FloatingPointError, match="spring 0 between nodes 0 and 1"):
+        spring_forces(model, np.zeros((2, 3)))
