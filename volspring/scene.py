@@ -41,6 +41,7 @@ class State:
     x : (n, 3) float -- positions [m]
     v : (n, 3) float -- velocities [m/s]
     t : float -- time [s]
+    step : int -- number of steps taken to reach this state
     memory : dict -- what an integrator carries from step to step (previous positions and step of
         the Verlet family, the implicit solver's warm start); part of the state so that a
         checkpoint of the state resumes bit-identically
@@ -49,6 +50,7 @@ class State:
     x: np.ndarray
     v: np.ndarray
     t: float = 0.0
+    step: int = 0
     memory: dict = field(default_factory=dict)
 
     def replace(self, **changes) -> "State":
@@ -149,9 +151,12 @@ class Scene:
     model : SpringModel
     forces : sequence of force objects (see the module docstring), e.g. ``Gravity``, ``Drag``
     pins : Pins, optional
-    obstacles : sequence -- non-penetration obstacles applied after each step
-    constraints : sequence -- position projections for the Verlet family (distance constraints,
-        strain limiting), applied after each step
+    obstacles : sequence -- non-penetration obstacles, projected after each step
+    constraints : sequence -- position projections (distance constraints, strain limiting; meant
+        for the Verlet family), projected after each step
+
+    Obstacles and constraints have ``project(x, v, x_start, t, dt, free)``: after a step from
+    ``x_start`` they move the free nodes' positions ``x`` (and fix velocities ``v``) in place.
     """
 
     model: SpringModel
@@ -190,6 +195,12 @@ class Scene:
         if self.pins is not None:
             x[self.pins.nodes] = self.pins.positions(self.model.rest_positions, t)
             v[self.pins.nodes] = self.pins.velocities(t)
+
+    def project(self, x, v, x_start, t, dt) -> None:
+        """After a step: project constraints, then obstacles, then put pinned nodes back, in place."""
+        for item in self.constraints + self.obstacles:
+            item.project(x, v, x_start, t, dt, self.free)
+        self.enforce_pins(x, v, t)
 
     def forces_at(self, x, v, t) -> np.ndarray:
         """(n, 3) float -- total force on every node [N]: springs, dampers and the scene's forces."""

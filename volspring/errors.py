@@ -1,0 +1,25 @@
+"""Exceptions and warnings raised while simulating."""
+
+from __future__ import annotations
+
+__all__ = ["SimulationDiverged", "StepTooLargeWarning", "SolverNotConverged"]
+
+
+class SimulationDiverged(FloatingPointError):
+    """The state became non-finite or its energy ran away.
+
+    Attributes name where: ``step``, ``time`` [s], ``dt`` [s] and ``node`` (the worst node).
+    """
+
+    def __init__(self, reason, *, step, time, dt, node):
+        self.step, self.time, self.dt, self.node = step, time, dt, node
+        super().__init__(f"simulation diverged at step {step} (t = {time:.6g} s, dt = {dt:.6g} s), "
+                         f"worst node {node}: {reason}")
+
+
+class StepTooLargeWarning(RuntimeWarning):
+    """An explicit integrator was asked to step beyond its stability limit."""
+
+
+class SolverNotConverged(RuntimeError):
+    """A linear or nonlinear solve stopped before reaching its tolerance; the message gives the residual."""

@@ -1,0 +1,54 @@
+"""The interface every integrator shares."""
+
+from __future__ import annotations
+
+import math
+from abc import ABC, abstractmethod
+
+import numpy as np
+
+from volspring.errors import SimulationDiverged
+from volspring.scene import Scene, State
+
+__all__ = ["Integrator"]
+
+
+class Integrator(ABC):
+    """One time step: ``integrator.step(scene, state, dt) -> State``.
+
+    Subclasses implement :meth:`advance` (the raw scheme on all nodes); :meth:`step` adds what
+    every scheme needs: a check of ``dt``, the projection of constraints, obstacles and pins
+    after the step, and divergence detection (no NaN or Inf ever leaves a step).
+
+    Class attributes
+    ----------------
+    name : str -- the name used by ``make_integrator`` and the CLI
+    order : int -- global order of accuracy
+    explicit : bool
+    stability_limit : float -- largest stable h * omega_max for an undamped spring (inf if none)
+    """
+
+    name: str = ""
+    order: int = 0
+    explicit: bool = True
+    stability_limit: float = math.inf
+
+    @abstractmethod
+    def advance(self, scene: Scene, state: State, dt: float) -> State:
+        """The scheme itself: the next state before projections. Must not modify ``state``."""
+
+    def step(self, scene: Scene, state: State, dt: float) -> State:
+        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt = {dt!r} s is not a finite number > 0")
+        new = self.advance(scene, state, dt)
+        scene.project(new.x, new.v, state.x, new.t, dt)
+        check_finite(new, dt)
+        return new
+
+
+def check_finite(state: State, dt: float) -> None:
+    """Raise :class:`SimulationDiverged` if ``state`` holds NaN or Inf, naming the worst node."""
+    bad = ~(np.isfinite(state.x).all(axis=1) & np.isfinite(state.v).all(axis=1))
+    if bad.any():
+        raise SimulationDiverged("positions or velocities are not finite", step=state.step, time=state.t,
+                                 dt=dt, node=int(np.flatnonzero(bad)[0]))
