@@ -1,0 +1,326 @@
+"""Built-in closed shapes with exact volumes: triangle surfaces for any backend, OCC solids for gmsh.
+
+Every shape is centred on the origin; lengths are in metres. ``parse_shape("box:1,0.1,0.1")``
+reads the command-line form ``NAME:D1,D2,...``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["SHAPE_NAMES", "Shape", "box", "cylinder", "ellipsoid", "parse_shape", "sphere", "torus"]
+
+
+@dataclass(frozen=True)
+class _ShapeKind:
+    parameters: tuple  # names of the dimensions, in order
+    volume: Callable  # dimensions -> exact volume [m^3]
+    surface: Callable  # (dimensions, size) -> trimesh.Trimesh
+    occ: Callable  # (gmsh.model.occ, dimensions) -> volume tag
+
+
+@dataclass(frozen=True)
+class Shape:
+    """A built-in closed shape: its name, its dimensions and everything derived from them.
+
+    Parameters
+    ----------
+    name : str -- one of :data:`SHAPE_NAMES`
+    dimensions : tuple of float -- the shape's dimensions [m], in the order of ``parameters``
+
+    Examples
+    --------
+    >>> shape = parse_shape("box:1,0.1,0.1")
+    >>> shape.parameters, round(shape.volume, 12)
+    (('lx', 'ly', 'lz'), 0.01)
+    >>> shape.surface(size=0.05).is_watertight
+    True
+    """
+
+    name: str
+    dimensions: tuple
+
+    def __post_init__(self):
+        if self.name not in _KINDS:
+            raise ValueError(f"unknown shape {self.name!r}; known shapes: {', '.join(SHAPE_NAMES)}")
+        parameters = _KINDS[self.name].parameters
+        dimensions = tuple(float(d) for d in self.dimensions)
+        if len(dimensions) != len(parameters):
+            raise ValueError(
+                f"{self.name} takes {len(parameters)} dimension(s) ({', '.join(parameters)}), got {len(dimensions)}"
+            )
+        for parameter, value in zip(parameters, dimensions):
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{self.name}: {parameter} = {value} is not a positive finite length")
+        if self.name == "torus" and dimensions[1] >= dimensions[0]:
+            raise ValueError(
+                f"torus: minor radius r = {dimensions[1]} must be < major radius R = {dimensions[0]} "
+                "(otherwise the torus intersects itself)"
+            )
+        object.__setattr__(self, "dimensions", dimensions)
+
+    @property
+    def parameters(self) -> tuple:
+        """Names of the dimensions, in order."""
+        return _KINDS[self.name].parameters
+
+    @property
+    def volume(self) -> float:
+        """Exact volume of the shape [m^3]."""
+        return float(_KINDS[self.name].volume(*self.dimensions))
+
+    @property
+    def extent(self) -> float:
+        """Largest extent of the shape's bounding box [m]."""
+        low, high = self.bounds
+        return float((high - low).max())
+
+    @property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float -- lower and upper corners of the exact bounding box [m]."""
+        d = self.dimensions
+        if self.name == "box":
+            half = (d[0] / 2, d[1] / 2, d[2] / 2)
+        elif self.name == "cylinder":
+            half = (d[0], d[0], d[1] / 2)
+        elif self.name == "torus":
+            half = (d[0] + d[1], d[0] + d[1], d[1])
+        elif self.name == "ellipsoid":
+            half = d
+        else:
+            half = (d[0],) * 3
+        return np.array([[-h for h in half], list(half)], dtype=np.float64)
+
+    def surface(self, *, size: float):
+        """A closed, outward-wound triangle surface of the shape with edges of about ``size``.
+
+        Parameters
+        ----------
+        size : float -- target edge length [m]; vertices lie on the exact shape
+
+        Returns
+        -------
+        trimesh.Trimesh -- watertight, outward normals
+        """
+        if not (math.isfinite(size) and size > 0):
+            raise ValueError(f"size = {size} is not a positive finite length")
+        mesh = _KINDS[self.name].surface(self.dimensions, float(size))
+        if mesh.volume < 0:
+            mesh.invert()
+        return mesh
+
+    def add_to_gmsh(self) -> int:
+        """Add the shape as one OCC solid to the current gmsh model and synchronise; returns its volume tag."""
+        import gmsh
+
+        tag = _KINDS[self.name].occ(gmsh.model.occ, self.dimensions)
+        gmsh.model.occ.synchronize()
+        return tag
+
+    def spec(self) -> str:
+        """The command-line form, e.g. ``box:1,0.1,0.1``."""
+        return f"{self.name}:" + ",".join(f"{d:g}" for d in self.dimensions)
+
+    def __str__(self) -> str:
+        return self.spec()
+
+
+# ---------------------------------------------------------------------- triangle surfaces
+def _grid(nu, nv):
+    """Parameters (k, 2) in [0, 1]^2 and triangles (2 nu nv, 3) of an nu x nv grid of quads."""
+    u, v = np.meshgrid(np.linspace(0, 1, nu + 1), np.linspace(0, 1, nv + 1), indexing="ij")
+    index = np.arange((nu + 1) * (nv + 1)).reshape(nu + 1, nv + 1)
+    a, b, c, d = index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()
+    return np.stack([u.ravel(), v.ravel()], axis=1), np.concatenate([np.stack([a, b, c], 1), np.stack([a, c, d], 1)])
+
+
+def _welded(parts):
+    """One surface from (vertices, faces) parts of a convex shape whose shared borders coincide; wound outward."""
+    import trimesh
+
+    vertices = np.concatenate([v for v, _ in parts])
+    offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
+    faces = np.concatenate([f + offset for (_, f), offset in zip(parts, offsets)])
+    # The shapes welded here are convex and centred on the origin: outward means away from it.
+    corners = vertices[faces]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    inward = np.einsum("ij,ij->i", normals, corners.mean(axis=1)) < 0
+    faces[inward] = faces[inward][:, ::-1]
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    mesh.merge_vertices()
+    return mesh
+
+
+def _box_surface(d, size):
+    d = np.asarray(d)
+    parts = []
+    for axis in range(3):
+        u_axis, v_axis = [a for a in range(3) if a != axis]
+        (nu, nv) = (max(1, math.ceil(d[u_axis] / size)), max(1, math.ceil(d[v_axis] / size)))
+        uv, faces = _grid(nu, nv)
+        for side in (-0.5, 0.5):
+            vertices = np.empty((len(uv), 3))
+            vertices[:, axis] = side * d[axis]
+            vertices[:, u_axis] = (uv[:, 0] - 0.5) * d[u_axis]
+            vertices[:, v_axis] = (uv[:, 1] - 0.5) * d[v_axis]
+            parts.append((vertices, faces))
+    return _welded(parts)
+
+
+def _icosphere(radius, size):
+    import trimesh
+
+    # An icosahedron inscribed in the unit sphere has edges of 1.0515; each subdivision halves them.
+    subdivisions = max(0, math.ceil(math.log2(1.0515 * radius / size)))
+    return trimesh.creation.icosphere(subdivisions=subdivisions, radius=1.0)
+
+
+def _sphere_surface(d, size):
+    mesh = _icosphere(d[0], size)
+    mesh.vertices *= d[0]
+    return mesh
+
+
+def _ellipsoid_surface(d, size):
+    mesh = _icosphere(max(d), size)
+    mesh.vertices *= np.asarray(d)
+    return mesh
+
+
+def _cylinder_surface(d, size):
+    from scipy.spatial import Delaunay
+
+    radius, length = d
+    sections = max(8, math.ceil(2 * math.pi * radius / size))
+    rings = max(1, math.ceil(length / size))
+    uv, faces = _grid(sections, rings)
+    theta = 2 * math.pi * uv[:, 0]
+    side = np.stack([radius * np.cos(theta), radius * np.sin(theta), (uv[:, 1] - 0.5) * length], axis=1)
+    parts = [(side, faces)]
+    # Each cap: the rim points plus concentric rings inside, triangulated in 2D (the disc is convex).
+    levels = np.arange(1, max(1, math.ceil(radius / size)))[::-1] / max(1, math.ceil(radius / size))
+    disc = [np.zeros((1, 2))]
+    for level in np.concatenate([[1.0], levels]):
+        count = max(6, math.ceil(sections * level)) if level < 1 else sections
+        phi = 2 * math.pi * np.arange(count) / count
+        disc.append(radius * level * np.stack([np.cos(phi), np.sin(phi)], axis=1))
+    disc = np.concatenate(disc)
+    triangles = Delaunay(disc).simplices
+    for z in (-length / 2, length / 2):
+        parts.append((np.column_stack([disc, np.full(len(disc), z)]), triangles))
+    return _welded(parts)
+
+
+def _torus_surface(d, size):
+    import trimesh
+
+    major, minor = d
+    return trimesh.creation.torus(
+        major_radius=major,
+        minor_radius=minor,
+        major_sections=max(8, math.ceil(2 * math.pi * (major + minor) / size)),
+        minor_sections=max(6, math.ceil(2 * math.pi * minor / size)),
+    )
+
+
+# ---------------------------------------------------------------------- OCC solids
+def _box_occ(occ, d):
+    return occ.addBox(-d[0] / 2, -d[1] / 2, -d[2] / 2, d[0], d[1], d[2])
+
+
+def _sphere_occ(occ, d):
+    return occ.addSphere(0.0, 0.0, 0.0, d[0])
+
+
+def _ellipsoid_occ(occ, d):
+    tag = occ.addSphere(0.0, 0.0, 0.0, 1.0)
+    occ.dilate([(3, tag)], 0.0, 0.0, 0.0, d[0], d[1], d[2])
+    return tag
+
+
+def _cylinder_occ(occ, d):
+    return occ.addCylinder(0.0, 0.0, -d[1] / 2, 0.0, 0.0, d[1], d[0])
+
+
+def _torus_occ(occ, d):
+    return occ.addTorus(0.0, 0.0, 0.0, d[0], d[1])
+
+
+_KINDS = {
+    "box": _ShapeKind(("lx", "ly", "lz"), lambda a, b, c: a * b * c, _box_surface, _box_occ),
+    "sphere": _ShapeKind(("r",), lambda r: 4 / 3 * math.pi * r**3, _sphere_surface, _sphere_occ),
+    "cylinder": _ShapeKind(("r", "length"), lambda r, h: math.pi * r**2 * h, _cylinder_surface, _cylinder_occ),
+    "torus": _ShapeKind(("R", "r"), lambda R, r: 2 * math.pi**2 * R * r**2, _torus_surface, _torus_occ),
+    "ellipsoid": _ShapeKind(("a", "b", "c"), lambda a, b, c: 4 / 3 * math.pi * a * b * c,
+                            _ellipsoid_surface, _ellipsoid_occ),
+}
+
+#: Names of the built-in shapes.
+SHAPE_NAMES = tuple(_KINDS)
+
+
+def box(lx: float, ly: float, lz: float) -> Shape:
+    """An axis-aligned box of edges ``lx, ly, lz`` [m], centred on the origin."""
+    return Shape("box", (lx, ly, lz))
+
+
+def sphere(r: float) -> Shape:
+    """A sphere of radius ``r`` [m]."""
+    return Shape("sphere", (r,))
+
+
+def cylinder(r: float, length: float) -> Shape:
+    """A cylinder of radius ``r`` [m] and ``length`` [m] along z."""
+    return Shape("cylinder", (r, length))
+
+
+def torus(R: float, r: float) -> Shape:  # noqa: N803 -- R and r are the usual names
+    """A torus around z of major radius ``R`` [m] and minor (tube) radius ``r < R`` [m]."""
+    return Shape("torus", (R, r))
+
+
+def ellipsoid(a: float, b: float, c: float) -> Shape:
+    """An ellipsoid of semi-axes ``a, b, c`` [m] along x, y, z."""
+    return Shape("ellipsoid", (a, b, c))
+
+
+def parse_shape(spec: str) -> Shape:
+    """Read a built-in shape from its command-line form ``NAME:D1,D2,...``.
+
+    Parameters
+    ----------
+    spec : str -- e.g. ``"box:1,0.1,0.1"``, ``"sphere:0.5"``, ``"cylinder:0.2,1"``, ``"torus:0.5,0.15"``
+
+    Raises
+    ------
+    ValueError
+        For an unknown shape name, the wrong number of dimensions, or dimensions that are
+        not positive finite numbers.
+
+    Examples
+    --------
+    >>> parse_shape("torus:0.5,0.15")
+    Shape(name='torus', dimensions=(0.5, 0.15))
+    """
+    name, colon, rest = str(spec).strip().partition(":")
+    name = name.strip().lower()
+    if name not in _KINDS:
+        raise ValueError(f"unknown shape {name!r} in {spec!r}; known shapes: {', '.join(SHAPE_NAMES)}")
+    if not colon or not rest.strip():
+        example = ",".join(_KINDS[name].parameters)
+        raise ValueError(f"{spec!r} gives no dimensions; expected {name}:{example}")
+    try:
+        dimensions = tuple(float(part) for part in rest.split(","))
+    except ValueError:
+        raise ValueError(f"dimensions in {spec!r} must be numbers separated by commas") from None
+    return Shape(name, dimensions)
+
+
+def looks_like_shape(text: str) -> bool:
+    """Whether ``text`` is meant as a built-in shape spec (``NAME:...`` with no path separator or extension)."""
+    name, colon, _ = str(text).partition(":")
+    return bool(colon) and name.isidentifier() and len(name) > 1
