@@ -1,0 +1,156 @@
+"""Several deformable bodies seen as one: the static, concatenated topology collision queries run on."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from volspring.mesh import TetMesh
+
+__all__ = ["CollisionBodies"]
+
+
+@dataclass(frozen=True, eq=False)
+class CollisionBodies:
+    """The tet meshes of a scene's deformable bodies, numbered globally.
+
+    Node ``i`` of body ``b`` has global id ``node_offsets[b] + i``, tet ``t`` of body ``b`` has
+    global id ``tet_offsets[b] + t``; every array below uses global ids. The positions of a step
+    are passed separately (one ``(N, 3)`` array, or one array per body), so this object is built
+    once per scene.
+
+    Parameters
+    ----------
+    meshes : sequence of TetMesh -- the bodies, in body-id order
+
+    Examples
+    --------
+    >>> from volspring import TetMesh
+    >>> from volspring.collision import CollisionBodies
+    >>> import numpy as np
+    >>> tet = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
+    >>> bodies = CollisionBodies((tet, tet))
+    >>> bodies.node_count, bodies.tets[1].tolist(), bodies.node_body.tolist()
+    (8, [4, 5, 6, 7], [0, 0, 0, 0, 1, 1, 1, 1])
+    """
+
+    meshes: tuple
+
+    def __post_init__(self):
+        meshes = tuple(self.meshes)
+        if not meshes:
+            raise ValueError("CollisionBodies needs at least one TetMesh, got none")
+        for index, mesh in enumerate(meshes):
+            if not isinstance(mesh, TetMesh):
+                raise TypeError(f"meshes[{index}] must be a TetMesh, got {type(mesh).__name__}")
+        object.__setattr__(self, "meshes", meshes)
+
+    # ------------------------------------------------------------------ numbering
+    @property
+    def body_count(self) -> int:
+        return len(self.meshes)
+
+    @cached_property
+    def node_offsets(self) -> np.ndarray:
+        """(b + 1,) int64 -- first global node id of each body, then the node count."""
+        return _frozen(np.concatenate([[0], np.cumsum([m.node_count for m in self.meshes])]).astype(np.int64))
+
+    @cached_property
+    def tet_offsets(self) -> np.ndarray:
+        """(b + 1,) int64 -- first global tet id of each body, then the tet count."""
+        return _frozen(np.concatenate([[0], np.cumsum([m.tet_count for m in self.meshes])]).astype(np.int64))
+
+    @property
+    def node_count(self) -> int:
+        return int(self.node_offsets[-1])
+
+    @property
+    def tet_count(self) -> int:
+        return int(self.tet_offsets[-1])
+
+    @cached_property
+    def node_body(self) -> np.ndarray:
+        """(N,) int64 -- body id of each global node."""
+        return _frozen(np.repeat(np.arange(self.body_count), np.diff(self.node_offsets)))
+
+    @cached_property
+    def tet_body(self) -> np.ndarray:
+        """(M,) int64 -- body id of each global tet."""
+        return _frozen(np.repeat(np.arange(self.body_count), np.diff(self.tet_offsets)))
+
+    # ------------------------------------------------------------------ topology
+    @cached_property
+    def tets(self) -> np.ndarray:
+        """(M, 4) int64 -- global node ids of each tet, positively oriented at rest."""
+        return _frozen(np.concatenate([m.tets + o for m, o in zip(self.meshes, self.node_offsets)]))
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(E, 2) int64 -- unique tet edges, global node ids, ``i < j``."""
+        return _frozen(np.concatenate([m.edges + o for m, o in zip(self.meshes, self.node_offsets)]))
+
+    @cached_property
+    def boundary_faces(self) -> np.ndarray:
+        """(F, 3) int64 -- outward-wound boundary triangles, global node ids."""
+        return _frozen(np.concatenate([m.boundary_faces + o for m, o in zip(self.meshes, self.node_offsets)]))
+
+    @cached_property
+    def boundary_face_body(self) -> np.ndarray:
+        """(F,) int64 -- body id of each boundary triangle."""
+        counts = [len(m.boundary_faces) for m in self.meshes]
+        return _frozen(np.repeat(np.arange(self.body_count), counts))
+
+    @cached_property
+    def neighbours(self) -> tuple[np.ndarray, np.ndarray]:
+        """CSR adjacency along tet edges: ``(indptr (N + 1,), indices (2E,))`` int64, global ids."""
+        both = np.concatenate([self.edges, self.edges[:, ::-1]])
+        both = both[np.lexsort((both[:, 1], both[:, 0]))]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(both[:, 0], minlength=self.node_count))])
+        return _frozen(indptr.astype(np.int64)), _frozen(both[:, 1].copy())
+
+    @cached_property
+    def mean_edge_length(self) -> float:
+        """Average rest edge length over all bodies [m]: the default hash cell size (Teschner et al.)."""
+        lengths = np.concatenate([m.edge_lengths for m in self.meshes])
+        return float(lengths.mean())
+
+    # ------------------------------------------------------------------ positions
+    def stack_positions(self, positions) -> np.ndarray:
+        """One ``(N, 3)`` float64 array from a ``(N, 3)`` array or a sequence of ``(n_b, 3)`` arrays.
+
+        Raises
+        ------
+        ValueError
+            When the shapes do not match the bodies' node counts or a coordinate is not finite.
+        """
+        if isinstance(positions, np.ndarray):
+            stacked = np.asarray(positions, dtype=np.float64)
+        else:
+            parts = [np.asarray(p, dtype=np.float64) for p in positions]
+            if len(parts) != self.body_count:
+                raise ValueError(f"got positions for {len(parts)} bodies, expected {self.body_count}")
+            for b, (part, mesh) in enumerate(zip(parts, self.meshes)):
+                if part.shape != (mesh.node_count, 3):
+                    raise ValueError(f"positions[{b}] has shape {part.shape}, expected ({mesh.node_count}, 3)")
+            stacked = np.concatenate(parts)
+        if stacked.shape != (self.node_count, 3):
+            raise ValueError(f"positions have shape {stacked.shape}, expected ({self.node_count}, 3)")
+        if not np.isfinite(stacked).all():
+            bad = np.flatnonzero(~np.isfinite(stacked).all(axis=1))
+            raise ValueError(f"{len(bad)} position(s) are not finite, first is global node {bad[0]}")
+        return stacked
+
+    @property
+    def rest_positions(self) -> np.ndarray:
+        """(N, 3) float -- the meshes' own node positions, stacked [m]."""
+        return np.concatenate([m.points for m in self.meshes])
+
+    def __repr__(self) -> str:
+        return f"CollisionBodies({self.body_count} bodies, {self.node_count} nodes, {self.tet_count} tets)"
+
+
+def _frozen(array: np.ndarray) -> np.ndarray:
+    array.setflags(write=False)
+    return array

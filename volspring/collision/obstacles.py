@@ -1,0 +1,281 @@
+"""Static obstacles: half-spaces and rigid triangle meshes, closed (a box, a rock) or open (a ramp, a bowl).
+
+A static obstacle never moves and is infinitely stiff, so for it the depth of a vertex is simply
+its distance to the nearest point of the obstacle's surface, in the direction of that point. This
+is the closest-point rule that fails for two thin deformable bodies (see
+:mod:`volspring.collision.penetration`); for a rigid obstacle it is acceptable as long as the time
+step keeps a vertex from travelling more than half the obstacle's thickness in one step, because
+a vertex only ever enters from the near side.
+
+Inside/outside of a closed mesh uses the angle-weighted pseudo-normal at the nearest point
+(Baerentzen and Aanaes 2005), exact for a closed, outward-wound, manifold surface.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from volspring.collision.triangles import nearest_surface_points
+
+__all__ = ["HalfSpace", "ObstacleContacts", "StaticTriangleMesh", "obstacle_contacts"]
+
+
+def _unit(vector, name):
+    vector = np.asarray(vector, dtype=np.float64)
+    if vector.shape != (3,) or not np.isfinite(vector).all():
+        raise ValueError(f"{name} must be 3 finite numbers, got {vector!r}")
+    length = np.linalg.norm(vector)
+    if length == 0:
+        raise ValueError(f"{name} = {vector.tolist()} has zero length; expected a direction")
+    return vector / length
+
+
+@dataclass(frozen=True, eq=False)
+class HalfSpace:
+    """The solid ``{x : (x - point).normal <= 0}``, e.g. a floor.
+
+    Parameters
+    ----------
+    point : (3,) float -- a point of the bounding plane [m]
+    normal : (3,) float -- outward normal (normalised here)
+
+    Examples
+    --------
+    >>> floor = HalfSpace(point=(0, 0, 0), normal=(0, 0, 1))
+    >>> vertex, depth, direction, closest, face = floor.contacts([[0.0, 0, -0.1], [0, 0, 0.2]])
+    >>> vertex.tolist(), depth.round(3).tolist(), direction.tolist()
+    ([0], [0.1], [[0.0, 0.0, 1.0]])
+    """
+
+    point: np.ndarray
+    normal: np.ndarray
+
+    def __post_init__(self):
+        point = np.asarray(self.point, dtype=np.float64)
+        if point.shape != (3,) or not np.isfinite(point).all():
+            raise ValueError(f"point must be 3 finite numbers, got {self.point!r}")
+        object.__setattr__(self, "point", point)
+        object.__setattr__(self, "normal", _unit(self.normal, "normal"))
+
+    def contacts(self, points):
+        """Vertices inside: ``(vertex (k,), depth (k,) [m], direction (k, 3), closest (k, 3) [m], face (k,) = -1)``."""
+        points = np.asarray(points, dtype=np.float64)
+        height = (points - self.point) @ self.normal
+        vertex = np.flatnonzero(height < 0)
+        depth = -height[vertex]
+        direction = np.broadcast_to(self.normal, (len(vertex), 3)).copy()
+        closest = points[vertex] + depth[:, None] * self.normal
+        return vertex, depth, direction, closest, np.full(len(vertex), -1, dtype=np.int64)
+
+
+@dataclass(frozen=True, eq=False)
+class StaticTriangleMesh:
+    """A rigid, static triangle surface.
+
+    Parameters
+    ----------
+    vertices : (v, 3) float -- corner positions [m]
+    faces : (f, 3) int -- triangles; a closed mesh is re-wound outward if it comes inward
+    band : float, optional -- for an open mesh, how far below its surface (on the side opposite the
+        faces' right-hand normals) a vertex still counts as penetrating [m]; required for open
+        meshes (a ramp has no inside), ignored for closed ones
+
+    Notes
+    -----
+    Closed means every edge is shared by exactly two faces. For an open mesh a vertex is in contact
+    when its nearest surface point is not on the open rim and its signed distance lies in
+    ``(-band, 0)``: vertices beyond the rim are beside the sheet, not under it. Use
+    :meth:`from_trimesh` to pass a ``trimesh.Trimesh`` (trimesh is not imported here).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    band: float | None = None
+    closed: bool = field(init=False)
+
+    def __post_init__(self):
+        vertices = np.array(self.vertices, dtype=np.float64)
+        faces = np.array(self.faces)
+        if vertices.ndim != 2 or vertices.shape[1] != 3 or not np.isfinite(vertices).all():
+            raise ValueError(f"vertices must be a finite (v, 3) array, got shape {vertices.shape}")
+        if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0 or not np.issubdtype(faces.dtype, np.integer):
+            raise ValueError(f"faces must be a non-empty (f, 3) integer array, got shape {faces.shape}, {faces.dtype}")
+        if faces.min() < 0 or faces.max() >= len(vertices):
+            raise ValueError(f"face indices must lie in [0, {len(vertices) - 1}], got [{faces.min()}, {faces.max()}]")
+        faces = faces.astype(np.int64)
+        _, counts = np.unique(np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0, return_counts=True)
+        closed = bool((counts == 2).all())
+        if closed:
+            x = vertices[faces]
+            volume = np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2])) / 6.0
+            if volume < 0:
+                faces = faces[:, ::-1].copy()
+        elif self.band is None or not np.isfinite(self.band) or self.band <= 0:
+            raise ValueError(f"band = {self.band} for an open mesh: expected a positive length [m], how far "
+                             "below the surface a vertex still counts as penetrating")
+        vertices.setflags(write=False)
+        faces.setflags(write=False)
+        object.__setattr__(self, "vertices", vertices)
+        object.__setattr__(self, "faces", faces)
+        object.__setattr__(self, "closed", closed)
+
+    @classmethod
+    def from_trimesh(cls, mesh, *, band=None) -> "StaticTriangleMesh":
+        """Take ``mesh.vertices`` and ``mesh.faces`` of a ``trimesh.Trimesh`` (or anything with both)."""
+        return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces), band=band)
+
+    # ------------------------------------------------------------------ cached static geometry
+    @cached_property
+    def _edges(self):
+        """Unique edges ``(e, 2)``, each face's edge ids ``(f, 3)`` (edge k joins corners k, k+1), face counts."""
+        half = np.sort(self.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        edges, inverse, counts = np.unique(half, axis=0, return_inverse=True, return_counts=True)
+        return edges, inverse.reshape(-1, 3), counts
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(f, 3) float -- unit right-hand normals (outward for a closed mesh)."""
+        x = self.vertices[self.faces]
+        normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+        return normal / np.linalg.norm(normal, axis=1, keepdims=True)
+
+    @cached_property
+    def _pseudo_normals(self):
+        """Angle-weighted vertex normals (v, 3) and edge normals (e, 3), unnormalised."""
+        x = self.vertices[self.faces]
+        angles = np.empty((len(self.faces), 3))
+        for k in range(3):  # three corners per face
+            u = x[:, (k + 1) % 3] - x[:, k]
+            w = x[:, (k + 2) % 3] - x[:, k]
+            cos = np.einsum("ij,ij->i", u, w) / (np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1))
+            angles[:, k] = np.arccos(np.clip(cos, -1.0, 1.0))
+        weighted = (angles[:, :, None] * self.face_normals[:, None, :]).reshape(-1, 3)
+        vertex = np.stack([np.bincount(self.faces.ravel(), weighted[:, i], len(self.vertices)) for i in range(3)], 1)
+        edges, face_edges, _ = self._edges
+        repeated = np.repeat(self.face_normals, 3, axis=0)
+        edge = np.stack([np.bincount(face_edges.ravel(), repeated[:, i], len(edges)) for i in range(3)], 1)
+        return vertex, edge
+
+    @cached_property
+    def _rim(self):
+        """Open rim: ``(vertex flags (v,), edge flags (e,))`` of edges used by one face only, and their ends."""
+        edges, _, counts = self._edges
+        rim_edge = counts == 1
+        rim_vertex = np.zeros(len(self.vertices), dtype=bool)
+        rim_vertex[edges[rim_edge].ravel()] = True
+        return rim_vertex, rim_edge
+
+    @cached_property
+    def _tree(self):
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.vertices[self.faces].mean(axis=1))
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float -- bounding box of the vertices [m]."""
+        return np.array([self.vertices.min(axis=0), self.vertices.max(axis=0)])
+
+    # ------------------------------------------------------------------ queries
+    def _feature_normal(self, face, barycentric):
+        """Pseudo-normal at the nearest point: of the face, the edge or the corner its weights select."""
+        zeros = barycentric == 0.0
+        zero_count = zeros.sum(axis=1)
+        vertex_normals, edge_normals = self._pseudo_normals
+        _, face_edges, _ = self._edges
+        normal = self.face_normals[face].copy()
+        on_edge = zero_count == 1
+        edge = face_edges[face, (np.argmax(zeros, axis=1) + 1) % 3]  # zero weight on corner k: edge k+1
+        normal[on_edge] = edge_normals[edge[on_edge]]
+        on_corner = zero_count == 2
+        corner = self.faces[face, np.argmax(barycentric, axis=1)]
+        normal[on_corner] = vertex_normals[corner[on_corner]]
+        rim_vertex, rim_edge = self._rim
+        on_rim = (on_edge & rim_edge[edge]) | (on_corner & rim_vertex[corner])
+        return normal / np.linalg.norm(normal, axis=1, keepdims=True), on_rim
+
+    def contacts(self, points):
+        """Vertices in contact: ``(vertex (k,), depth (k,) [m], direction (k, 3), closest (k, 3) [m], face (k,))``.
+
+        ``direction`` is the unit vector from the vertex to its nearest surface point (for a vertex
+        exactly on the surface, the surface's pseudo-normal).
+        """
+        points = np.asarray(points, dtype=np.float64)
+        margin = 0.0 if self.closed else self.band
+        lo, hi = self.bounds[0] - margin, self.bounds[1] + margin
+        near = np.flatnonzero(((points >= lo) & (points <= hi)).all(axis=1))
+        face, closest, bary, distance = nearest_surface_points(points[near], self.vertices, self.faces, tree=self._tree)
+        normal, on_rim = self._feature_normal(face, bary)
+        offset = closest - points[near]
+        signed = -np.einsum("ij,ij->i", offset, normal)  # (p - c).n: negative below / inside
+        inside = signed < 0
+        if not self.closed:
+            inside &= ~on_rim & (distance < self.band)
+        # The pseudo-normal sign is exact; |p - c| > 0 whenever signed < 0, so the division is safe.
+        keep = np.flatnonzero(inside)
+        direction = offset[keep] / distance[keep, None]
+        return near[keep], distance[keep], direction, closest[keep], face[keep]
+
+
+@dataclass(frozen=True, eq=False)
+class ObstacleContacts:
+    """Vertices inside static obstacles, one row per (vertex, obstacle).
+
+    Attributes
+    ----------
+    vertex : (k,) int64 -- global node id
+    obstacle : (k,) int64 -- index of the obstacle in the list given to :func:`obstacle_contacts`
+    depth : (k,) float -- distance to the obstacle's surface [m], > 0
+    direction : (k, 3) float -- unit direction that takes the vertex out (towards ``closest``)
+    closest : (k, 3) float -- nearest surface point, a natural anchor for friction [m]
+    face : (k,) int64 -- triangle of ``closest``; -1 for a half-space
+    """
+
+    vertex: np.ndarray
+    obstacle: np.ndarray
+    depth: np.ndarray
+    direction: np.ndarray
+    closest: np.ndarray
+    face: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.vertex)
+
+
+def obstacle_contacts(obstacles, positions) -> ObstacleContacts:
+    """Every vertex inside any static obstacle.
+
+    Parameters
+    ----------
+    obstacles : sequence of HalfSpace or StaticTriangleMesh
+    positions : (N, 3) float -- current node positions of all bodies, stacked [m]
+
+    Returns
+    -------
+    ObstacleContacts -- sorted by obstacle, then vertex
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> floor = HalfSpace(point=(0, 0, 0), normal=(0, 0, 1))
+    >>> hits = obstacle_contacts([floor], np.array([[0.0, 0, -0.1], [0, 0, 0.2]]))
+    >>> hits.vertex.tolist(), hits.obstacle.tolist()
+    ([0], [0])
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 2 or positions.shape[1] != 3:
+        raise ValueError(f"positions must have shape (N, 3), got {positions.shape}")
+    parts = []
+    for index, obstacle in enumerate(obstacles):  # a loop over obstacles, not over vertices
+        if not isinstance(obstacle, (HalfSpace, StaticTriangleMesh)):
+            raise TypeError(f"obstacles[{index}] must be a HalfSpace or StaticTriangleMesh, got {type(obstacle).__name__}")
+        vertex, depth, direction, closest, face = obstacle.contacts(positions)
+        parts.append((vertex, np.full(len(vertex), index, dtype=np.int64), depth, direction, closest, face))
+    if not parts:
+        parts = [(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
+                  np.zeros(0, np.int64))]
+    return ObstacleContacts(*(np.concatenate(column) for column in zip(*parts)))

@@ -1,0 +1,282 @@
+"""Spatial hashing of boxes (Teschner et al. 2003), and vertex-in-tet detection built on it.
+
+The hash table of the paper is replaced by a sort: every item (a vertex, a triangle) is entered
+in each grid cell its bounding box covers, under the key ``hash(cell) * G + group``; the keys are
+sorted once, and a query box looks up each of its cells with two binary searches. Cells whose
+hashes collide share a key range, so every candidate is checked against its real cell before any
+geometric test: a tiny table is slow, never wrong.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from volspring.collision.bodies import CollisionBodies
+
+__all__ = ["HASH_PRIMES", "DEFAULT_TABLE_SIZE", "SpatialHash", "VertexTetContacts", "cell_hash", "detect_collisions"]
+
+logger = logging.getLogger(__name__)
+
+HASH_PRIMES = (73856093, 19349663, 83492791)
+# 2^31 - 1 is prime; with sorting in place of a table the size costs no memory, and a large
+# table keeps different cells from sharing keys (which would only cost time, see the module doc).
+DEFAULT_TABLE_SIZE = 2_147_483_647
+_GROUP_RULES = ("all", "other", "same")
+
+
+def cell_hash(cells, table_size=DEFAULT_TABLE_SIZE) -> np.ndarray:
+    """Teschner's hash of integer cells: ``(i p1 xor j p2 xor k p3) mod table_size``.
+
+    Parameters
+    ----------
+    cells : (k, 3) int64 -- cell coordinates ``floor(x / cell_size)``
+    table_size : int -- number of hash buckets, ``1 <= table_size <= 2**31 - 1``
+
+    Returns
+    -------
+    (k,) int64 -- hashes in ``[0, table_size)``; products wrap in int64 (still deterministic) and
+    ``np.mod`` with a positive divisor never returns a negative value.
+    """
+    cells = np.asarray(cells, dtype=np.int64)
+    mixed = (cells[:, 0] * HASH_PRIMES[0]) ^ (cells[:, 1] * HASH_PRIMES[1]) ^ (cells[:, 2] * HASH_PRIMES[2])
+    return np.mod(mixed, np.int64(table_size))
+
+
+def expand_ranges(starts, counts) -> tuple[np.ndarray, np.ndarray]:
+    """Flatten ranges ``[starts[r], starts[r] + counts[r])``: ``(owner, index)``, both ``(sum(counts),) int64``."""
+    counts = np.asarray(counts, dtype=np.int64)
+    owner = np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+    first = np.cumsum(counts) - counts
+    index = np.arange(len(owner), dtype=np.int64) - first[owner] + np.asarray(starts, dtype=np.int64)[owner]
+    return owner, index
+
+
+def _box_cells(cell_lo, cell_hi):
+    """Every cell of each integer box: ``(owner (K,), cells (K, 3))``, variable sizes expanded by np.repeat."""
+    size = cell_hi - cell_lo + 1
+    owner, local = expand_ranges(np.zeros(len(size), dtype=np.int64), size.prod(axis=1))
+    ny, nz = size[owner, 1], size[owner, 2]
+    offset = np.stack([local // (ny * nz), (local // nz) % ny, local % nz], axis=1)
+    return owner, cell_lo[owner] + offset
+
+
+def _check_table_size(table_size):
+    if not 1 <= int(table_size) <= DEFAULT_TABLE_SIZE:
+        raise ValueError(f"table_size = {table_size} is not in [1, {DEFAULT_TABLE_SIZE}]")
+    return int(table_size)
+
+
+@dataclass(frozen=True, eq=False)
+class SpatialHash:
+    """Axis-aligned boxes entered in a hashed uniform grid, queried by other boxes.
+
+    Build with :meth:`build`; :meth:`query` returns every (query box, item box) pair whose boxes
+    overlap, each pair once.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> points = np.array([[0.1, 0.1, 0.1], [2.5, 0.0, 0.0]])
+    >>> grid = SpatialHash.build(points, points, cell_size=1.0)
+    >>> grid.query(np.zeros((1, 3)), np.full((1, 3), 0.5))
+    (array([0]), array([0]))
+    """
+
+    cell_size: float
+    table_size: int
+    group_count: int
+    item_lo: np.ndarray  # (k, 3) float
+    item_hi: np.ndarray  # (k, 3) float
+    item_cell_lo: np.ndarray  # (k, 3) int64
+    keys: np.ndarray  # (K,) int64, sorted hash * group_count + group
+    entry_item: np.ndarray  # (K,) int64, item of each sorted entry
+    entry_cell: np.ndarray  # (K, 3) int64, real cell of each sorted entry
+
+    @classmethod
+    def build(cls, item_lo, item_hi, *, cell_size, table_size=DEFAULT_TABLE_SIZE, item_group=None) -> "SpatialHash":
+        """Enter boxes ``[item_lo, item_hi]`` ((k, 3) float [m]) in every cell they cover.
+
+        ``item_group`` ((k,) int, default all 0) tags each item, e.g. with its body id, so that
+        queries can keep only items of another group (or of the same group) without generating
+        the rest.
+        """
+        if not np.isfinite(cell_size) or cell_size <= 0:
+            raise ValueError(f"cell_size = {cell_size} is not a positive length")
+        table_size = _check_table_size(table_size)
+        item_lo = np.asarray(item_lo, dtype=np.float64)
+        item_hi = np.asarray(item_hi, dtype=np.float64)
+        group = np.zeros(len(item_lo), dtype=np.int64) if item_group is None else np.asarray(item_group, np.int64)
+        group_count = int(group.max()) + 1 if len(group) else 1
+        cell_lo = np.floor(item_lo / cell_size).astype(np.int64)
+        owner, cells = _box_cells(cell_lo, np.floor(item_hi / cell_size).astype(np.int64))
+        keys = cell_hash(cells, table_size) * group_count + group[owner]
+        order = np.argsort(keys, kind="stable")
+        return cls(float(cell_size), table_size, group_count, item_lo, item_hi, cell_lo,
+                   keys[order], owner[order], cells[order])
+
+    def query(self, query_lo, query_hi, *, query_group=None, rule="all") -> tuple[np.ndarray, np.ndarray]:
+        """All overlapping (query, item) box pairs.
+
+        Parameters
+        ----------
+        query_lo, query_hi : (q, 3) float -- query boxes [m]
+        query_group : (q,) int, optional -- group of each query (default 0)
+        rule : {"all", "other", "same"} -- which items a query may pair with: any, only those of
+            another group (e.g. another body), or only those of its own group
+
+        Returns
+        -------
+        (query, item) : two (p,) int64 arrays, each overlapping pair exactly once, in no set order
+        """
+        if rule not in _GROUP_RULES:
+            raise ValueError(f"rule = {rule!r} is not one of {_GROUP_RULES}")
+        query_lo = np.asarray(query_lo, dtype=np.float64)
+        query_hi = np.asarray(query_hi, dtype=np.float64)
+        groups = np.zeros(len(query_lo), dtype=np.int64) if query_group is None else np.asarray(query_group, np.int64)
+        q_cell_lo = np.floor(query_lo / self.cell_size).astype(np.int64)
+        owner, cells = _box_cells(q_cell_lo, np.floor(query_hi / self.cell_size).astype(np.int64))
+        base = cell_hash(cells, self.table_size) * self.group_count
+        g = groups[owner]
+        search = lambda key: np.searchsorted(self.keys, key)  # noqa: E731
+        if rule == "all":
+            ranges = [(search(base), search(base + self.group_count))]
+        elif rule == "same":
+            ranges = [(search(base + g), search(base + g + 1))]
+        else:
+            own_lo, own_hi = search(base + g), search(base + g + 1)
+            ranges = [(search(base), own_lo), (own_hi, search(base + self.group_count))]
+        pieces = []
+        for lo, hi in ranges:  # one or two ranges per query cell, never a loop over items
+            cell_index, entry = expand_ranges(lo, np.maximum(hi - lo, 0))
+            pieces.append((owner[cell_index], cells[cell_index], entry))
+        q = np.concatenate([p[0] for p in pieces])
+        qcell = np.concatenate([p[1] for p in pieces])
+        entry = np.concatenate([p[2] for p in pieces])
+        item = self.entry_item[entry]
+        # Hash collisions: keep an entry only if it is really in the cell that was looked up, and report
+        # each pair only in one cell, the low corner of the overlap of the two cell ranges.
+        keep = (self.entry_cell[entry] == qcell).all(axis=1)
+        keep &= (np.maximum(q_cell_lo[q], self.item_cell_lo[item]) == qcell).all(axis=1)
+        q, item = q[keep], item[keep]
+        overlap = ((self.item_lo[item] <= query_hi[q]) & (self.item_hi[item] >= query_lo[q])).all(axis=1)
+        return q[overlap], item[overlap]
+
+
+@dataclass(frozen=True, eq=False)
+class VertexTetContacts:
+    """Vertices found inside tets, sorted by (vertex, tet); all ids global (see CollisionBodies).
+
+    Attributes
+    ----------
+    vertex : (k,) int64 -- the penetrating vertex
+    tet : (k,) int64 -- the tet it is inside
+    barycentric : (k, 4) float -- weights of the tet's four nodes at the vertex (sum 1, all >= 0):
+        the response distributes the reaction on the tet's nodes with them
+    vertex_body, tet_body : (k,) int64 -- body ids (equal only for self-collisions)
+    """
+
+    vertex: np.ndarray
+    tet: np.ndarray
+    barycentric: np.ndarray
+    vertex_body: np.ndarray
+    tet_body: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.vertex)
+
+    @property
+    def colliding_vertices(self) -> np.ndarray:
+        """(c,) int64 -- sorted unique vertices inside at least one tet."""
+        return np.unique(self.vertex)
+
+
+def tet_inverse_rows(x0, x1, x2, x3) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``A^-1``, ``A = [x1 - x0, x2 - x0, x3 - x0]``, via the adjugate: ``((m, 3, 3), valid (m,))``.
+
+    ``beta = A^-1 (p - x0)`` are the barycentric weights of nodes 1..3. Flat tets (zero
+    determinant, possible in a deformed mesh) get zero rows and ``valid = False``.
+    """
+    a, b, c = x1 - x0, x2 - x0, x3 - x0
+    adjugate = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=1)
+    det = np.einsum("ij,ij->i", a, adjugate[:, 0])
+    # Flat relative to the tet's size: |det| below 1e-14 l^3 is round-off.
+    scale = np.maximum(np.abs(a).max(1), np.maximum(np.abs(b).max(1), np.abs(c).max(1))) ** 3
+    valid = np.abs(det) > 1e-14 * scale
+    inverse = np.where(valid[:, None, None], adjugate / np.where(valid, det, 1.0)[:, None, None], 0.0)
+    return inverse, valid
+
+
+def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, table_size=DEFAULT_TABLE_SIZE,
+                      self_collision=False) -> VertexTetContacts:
+    """Find every vertex inside a tet of another body (Teschner et al. 2003).
+
+    Pass 1 hashes every vertex into the grid cell it lies in; pass 2 visits the cells covered by
+    each tet's bounding box, takes the vertices found there, and keeps those inside the box and
+    then inside the tet (all barycentric weights ``>= 0``).
+
+    Parameters
+    ----------
+    bodies : CollisionBodies -- the topology of every deformable body
+    positions : (N, 3) float or sequence of (n_b, 3) float -- current node positions [m]
+    cell_size : float, optional -- grid cell edge [m]; default the mean rest edge length
+    table_size : int -- hash buckets; smaller only adds candidates, never changes the result
+    self_collision : bool -- also report a vertex inside a non-incident tet of its own body.
+        Off by default: pairs within a body are then never generated (nor is a tet whose box
+        misses every other body), so a scene without self-collision does not pay for it.
+
+    Returns
+    -------
+    VertexTetContacts
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volspring import TetMesh
+    >>> from volspring.collision import CollisionBodies, detect_collisions
+    >>> tet = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
+    >>> bodies = CollisionBodies((tet, tet))
+    >>> contacts = detect_collisions(bodies, [tet.points, tet.points + 0.1])
+    >>> contacts.vertex.tolist(), contacts.tet.tolist(), contacts.barycentric.round(2).tolist()
+    ([4], [0], [[0.7, 0.1, 0.1, 0.1]])
+    """
+    x = bodies.stack_positions(positions)
+    cell_size = bodies.mean_edge_length if cell_size is None else float(cell_size)
+    corners = x[bodies.tets]
+    tet_lo, tet_hi = corners.min(axis=1), corners.max(axis=1)
+    active_vertex = np.ones(bodies.node_count, dtype=bool)
+    active_tet = np.ones(bodies.tet_count, dtype=bool)
+    if not self_collision:
+        # Broad phase per body: only vertices and tets inside the box of the other bodies can pair.
+        body_lo = np.minimum.reduceat(x, bodies.node_offsets[:-1], axis=0)
+        body_hi = np.maximum.reduceat(x, bodies.node_offsets[:-1], axis=0)
+        itself = np.eye(bodies.body_count, dtype=bool)[:, :, None]
+        others_lo = np.where(itself, np.inf, body_lo[None]).min(axis=1)
+        others_hi = np.where(itself, -np.inf, body_hi[None]).max(axis=1)
+        nb, tb = bodies.node_body, bodies.tet_body
+        active_vertex = ((x >= others_lo[nb]) & (x <= others_hi[nb])).all(axis=1)
+        active_tet = ((tet_hi >= others_lo[tb]) & (tet_lo <= others_hi[tb])).all(axis=1)
+    vertices = np.flatnonzero(active_vertex)
+    tets = np.flatnonzero(active_tet)
+    grid = SpatialHash.build(x[vertices], x[vertices], cell_size=cell_size, table_size=table_size,
+                             item_group=bodies.node_body[vertices])
+    local_tet, local_vertex = grid.query(tet_lo[tets], tet_hi[tets], query_group=bodies.tet_body[tets],
+                                         rule="all" if self_collision else "other")
+    tet, vertex = tets[local_tet], vertices[local_vertex]
+    if self_collision:
+        own = (bodies.tets[tet] == vertex[:, None]).any(axis=1)
+        tet, vertex, local_tet = tet[~own], vertex[~own], local_tet[~own]
+    # Barycentric test with A^-1 precomputed per active tet (one 3x3 adjugate each).
+    inverse, valid = tet_inverse_rows(*(corners[tets, i] for i in range(4)))
+    beta = np.einsum("kij,kj->ki", inverse[local_tet], x[vertex] - corners[tet, 0])
+    inside = valid[local_tet] & (beta >= 0.0).all(axis=1) & (beta.sum(axis=1) <= 1.0)
+    tet, vertex, beta = tet[inside], vertex[inside], beta[inside]
+    order = np.lexsort((tet, vertex))
+    tet, vertex, beta = tet[order], vertex[order], beta[order]
+    barycentric = np.concatenate([1.0 - beta.sum(axis=1, keepdims=True), beta], axis=1)
+    logger.debug("detection: %d active vertices, %d active tets, %d candidates, %d contacts",
+                 len(vertices), len(tets), len(local_tet), len(vertex))
+    return VertexTetContacts(vertex, tet, barycentric, bodies.node_body[vertex], bodies.tet_body[tet])
