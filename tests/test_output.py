@@ -1,0 +1,269 @@
+"""ParaView (VTU/PVD) and Blender (OBJ/PC2) output: content read back, atomicity, NaN refused."""
+
+import struct
+import xml.etree.ElementTree as ET
+
+import meshio
+import numpy as np
+import pytest
+
+from volspring import Material, SpringModel, State
+from volspring.output import BlenderWriter, BoundarySurface, ParaViewWriter, read_pc2, read_pvd
+from volspring.springs import spring_strains
+
+from conftest import cube_mesh
+
+RUBBER = Material(E=1e5, nu=0.3, density=1000.0)
+
+
+@pytest.fixture
+def mesh():
+    return cube_mesh((2, 2, 2), size=(1.0, 0.5, 0.5))
+
+
+@pytest.fixture
+def model(mesh):
+    return SpringModel.from_mesh(mesh, RUBBER)
+
+
+def states(model, count, *, seed=0):
+    """Frames of a made-up motion: a growing shear plus noise, times that are not round in binary."""
+    rng = np.random.default_rng(seed)
+    x0 = model.rest_positions
+    shear = np.array([[1.0, 0.0, 0.2], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    return [State(x0 + k * 0.05 * (x0 @ (shear - np.eye(3)).T) + 1e-3 * rng.standard_normal(x0.shape),
+                  rng.standard_normal(x0.shape), t=0.1 * k + 1 / 3, step=10 * k) for k in range(count)]
+
+
+def leftovers(directory):
+    """Temporary files of atomic_path (dot-prefixed) left in a folder."""
+    return sorted(path.name for path in directory.iterdir() if path.name.startswith("."))
+
+
+# ---------------------------------------------------------------------- ParaView
+def test_vtu_frames_read_back_equal_the_state(tmp_path, model, mesh):
+    frames = states(model, 3)
+    writer = ParaViewWriter(tmp_path, model)
+    for k, state in enumerate(frames):
+        writer(k, state)
+    n = mesh.node_count
+    for k, state in enumerate(frames):
+        body = meshio.read(tmp_path / f"frame_{k:04d}.vtu")
+        # VTU stores float64 in binary: the state comes back bit for bit, so exact equality.
+        np.testing.assert_array_equal(body.points, state.x[:n])
+        np.testing.assert_array_equal(body.cells_dict["tetra"], mesh.tets)
+        np.testing.assert_array_equal(body.point_data["displacement"], state.x[:n] - mesh.points)
+        np.testing.assert_array_equal(body.point_data["velocity"], state.v[:n])
+        deformed = mesh.__class__.oriented(state.x[:n], mesh.tets)  # positive volumes of the sheared tets
+        np.testing.assert_allclose(body.cell_data["volume_ratio"][0], deformed.tet_volumes / mesh.tet_volumes,
+                                   rtol=1e-12)  # the same volumes computed twice: round-off only
+        springs = meshio.read(tmp_path / f"frame_springs_{k:04d}.vtu")
+        np.testing.assert_array_equal(springs.cells_dict["line"], model.springs)
+        np.testing.assert_array_equal(springs.cell_data["strain"][0], spring_strains(model, state.x))
+        np.testing.assert_array_equal(springs.point_data["velocity"], state.v)
+    assert leftovers(tmp_path) == []
+
+
+def test_pvd_lists_the_frames_with_their_real_times(tmp_path, model):
+    frames = states(model, 4)
+    writer = ParaViewWriter(tmp_path, model)
+    for k, state in enumerate(frames):
+        writer(k, state)
+    for pvd in (tmp_path / "frame.pvd", tmp_path / "frame_springs.pvd"):
+        root = ET.parse(pvd).getroot()  # valid XML, or this raises
+        assert root.tag == "VTKFile" and root.get("type") == "Collection"
+        entries = read_pvd(pvd)
+        # Times are written with repr: they read back exactly, not to a printed precision.
+        assert [time for time, _ in entries] == [state.t for state in frames]
+        assert all(file.is_file() and file.parent == tmp_path for _, file in entries)
+        # Files are named relative to the PVD, so the folder can be moved.
+        assert all("/" not in item.get("file") for item in root.iter("DataSet"))
+
+
+def test_a_failing_frame_leaves_no_partial_file_and_a_valid_pvd(tmp_path, model, monkeypatch):
+    frames = states(model, 3)
+    writer = ParaViewWriter(tmp_path, model)
+    writer(0, frames[0])
+    writer(1, frames[1])
+    real_write = meshio.write
+
+    def write_half_then_fail(path, mesh, **kwargs):
+        if mesh.cells[0].type == "line":  # the body file of the frame is already written
+            path.write_bytes(b"<VTKFile half written")
+            raise OSError("disk full")
+        return real_write(path, mesh, **kwargs)
+
+    monkeypatch.setattr(meshio, "write", write_half_then_fail)
+    with pytest.raises(OSError, match="disk full"):
+        writer(2, frames[2])
+    monkeypatch.setattr(meshio, "write", real_write)
+    assert leftovers(tmp_path) == []
+    assert not (tmp_path / "frame_0002.vtu").exists() and not (tmp_path / "frame_springs_0002.vtu").exists()
+    for pvd in ("frame.pvd", "frame_springs.pvd"):
+        entries = read_pvd(tmp_path / pvd)
+        assert [time for time, _ in entries] == [frames[0].t, frames[1].t]
+        assert all(meshio.read(file).points.shape == (model.node_count, 3) for _, file in entries)
+    # The writer goes on after the failure with the frame it could not write.
+    writer(2, frames[2])
+    assert len(read_pvd(tmp_path / "frame.pvd")) == 3
+
+
+@pytest.mark.parametrize("where", ["x", "v"])
+def test_nan_is_refused(tmp_path, model, where):
+    frames = states(model, 2)
+    writer = ParaViewWriter(tmp_path, model)
+    writer(0, frames[0])
+    bad = np.array(getattr(frames[1], where))
+    bad[5, 1] = np.nan
+    with pytest.raises(ValueError, match="node 5.*refusing to write NaN"):
+        writer(1, frames[1].replace(**{where: bad}))
+    assert sorted(path.name for path in tmp_path.iterdir()) == [
+        "frame.pvd", "frame_0000.vtu", "frame_springs.pvd", "frame_springs_0000.vtu"]
+    assert len(read_pvd(tmp_path / "frame.pvd")) == 1
+
+
+def test_times_must_increase(tmp_path, model):
+    frames = states(model, 2)
+    writer = ParaViewWriter(tmp_path, model)
+    writer(0, frames[1])
+    with pytest.raises(ValueError, match="not after the previous frame"):
+        writer(1, frames[0])
+
+
+def test_resume_keeps_earlier_frames_and_continues_numbering(tmp_path, model):
+    frames = states(model, 4)
+    first = ParaViewWriter(tmp_path, model)
+    for k, state in enumerate(frames[:3]):
+        first(k, state)
+    # A resumed run restarts from frame 2 (its checkpoint): frames 0 and 1 are kept.
+    again = ParaViewWriter(tmp_path, model, first_frame=2)
+    assert [time for time, _ in read_pvd(again.pvd_path)] == [frames[0].t, frames[1].t]
+    for state in frames[2:]:
+        again(0, state)
+    entries = read_pvd(tmp_path / "frame.pvd")
+    assert [time for time, _ in entries] == [state.t for state in frames]
+    assert [file.name for _, file in entries] == [f"frame_{k:04d}.vtu" for k in range(4)]
+    with pytest.raises(ValueError, match="lists 4 frame"):
+        ParaViewWriter(tmp_path, model, first_frame=9)
+
+
+def test_model_without_mesh_writes_springs_only(tmp_path):
+    string = SpringModel.from_arrays(np.c_[np.arange(4.0), np.zeros((4, 2))], np.ones(4),
+                                     [[0, 1], [1, 2], [2, 3]], stiffness=10.0)
+    writer = ParaViewWriter(tmp_path, string)
+    state = State(string.rest_positions * 1.5, np.zeros((4, 3)), t=0.0)
+    writer(0, state)
+    assert writer.pvd_path.name == "frame_springs.pvd" and not (tmp_path / "frame.pvd").exists()
+    lines = meshio.read(tmp_path / "frame_springs_0000.vtu")
+    np.testing.assert_allclose(lines.cell_data["strain"][0], 0.5, rtol=1e-15)  # every spring stretched by 1.5
+    with pytest.raises(ValueError, match="nothing to write"):
+        ParaViewWriter(tmp_path, string, springs=False)
+
+
+# ---------------------------------------------------------------------- Blender
+@pytest.fixture
+def anchored(mesh):
+    import trimesh
+
+    from meshing.anchor import anchor
+
+    ball = trimesh.creation.icosphere(subdivisions=2, radius=0.2)
+    ball.apply_translation([0.5, 0.25, 0.25])
+    return anchor(mesh, ball)
+
+
+def read_obj(path):
+    vertices, faces = [], []
+    for line in path.read_text().splitlines():
+        if line.startswith("v "):
+            vertices.append([float(word) for word in line.split()[1:]])
+        elif line.startswith("f "):
+            faces.append([int(word) - 1 for word in line.split()[1:]])
+    return np.array(vertices), np.array(faces)
+
+
+def test_pc2_and_obj_hold_the_anchored_surface_per_frame(tmp_path, model, anchored):
+    frames = states(model, 3)
+    writer = BlenderWriter(tmp_path, anchored, start_frame=1.0, sample_rate=2.0)
+    for k, state in enumerate(frames):
+        writer(k, state)
+    expected = np.array([anchored.deform(state.x) for state in frames])
+
+    raw = (tmp_path / "frame.pc2").read_bytes()
+    magic, version, points, start, rate, count = struct.unpack_from("<12siiffi", raw)
+    assert (magic, version, points, start, rate, count) == (b"POINTCACHE2\0", 1, anchored.point_count, 1.0, 2.0, 3)
+    assert len(raw) == 32 + 3 * points * 3 * 4  # header, then 3 samples of p float32 xyz, nothing else
+    samples, _, _ = read_pc2(tmp_path / "frame.pc2")
+    np.testing.assert_array_equal(samples, expected.astype(np.float32))  # float32 storage: exact after the cast
+
+    objs = sorted(tmp_path.glob("frame_*.obj"))
+    assert [path.name for path in objs] == ["frame_0000.obj", "frame_0001.obj", "frame_0002.obj"]
+    for path, surface in zip(objs, expected):
+        vertices, faces = read_obj(path)
+        # %.9g keeps 9 significant digits: relative error <= 5e-9 of coordinates of order 1.
+        np.testing.assert_allclose(vertices, surface, rtol=0, atol=1e-8)
+        np.testing.assert_array_equal(faces, anchored.faces)
+    assert leftovers(tmp_path) == []
+
+
+def test_boundary_surface_is_the_default(tmp_path, model, mesh):
+    frames = states(model, 2)
+    writer = BlenderWriter(tmp_path, model, obj=False)
+    for k, state in enumerate(frames):
+        writer(k, state)
+    surface = BoundarySurface.from_mesh(mesh)
+    # A 2x2x2-cell box: all nodes but the single interior one are on the boundary.
+    assert surface.point_count == mesh.node_count - 1
+    assert len(surface.faces) == 2 * (2 * 4 + 2 * 4 + 2 * 4)  # two triangles per boundary quad
+    samples, _, _ = read_pc2(writer.pc2_path)
+    np.testing.assert_array_equal(samples[1], frames[1].x[surface.nodes].astype(np.float32))
+    assert not list(tmp_path.glob("*.obj"))
+
+
+def test_pc2_stays_valid_after_a_crash_and_resumes(tmp_path, model, anchored):
+    frames = states(model, 4)
+    writer = BlenderWriter(tmp_path, anchored)
+    for k, state in enumerate(frames[:2]):
+        writer(k, state)
+    # A crash in the middle of appending frame 2: half its bytes reached the disk, the count did not.
+    with open(writer.pc2_path, "ab") as file:
+        file.write(b"\x01" * (6 * anchored.point_count))
+    samples, _, _ = read_pc2(writer.pc2_path)
+    assert len(samples) == 2
+    again = BlenderWriter(tmp_path, anchored, first_frame=2)
+    for state in frames[2:]:
+        again(0, state)
+    samples, _, _ = read_pc2(writer.pc2_path)
+    expected = np.array([anchored.deform(state.x) for state in frames]).astype(np.float32)
+    np.testing.assert_array_equal(samples, expected)
+    assert writer.pc2_path.stat().st_size == 32 + expected.nbytes  # the crashed bytes were cut off
+
+
+def test_blender_writer_refuses_nan_and_writes_nothing(tmp_path, model, anchored):
+    frames = states(model, 2)
+    writer = BlenderWriter(tmp_path, anchored)
+    writer(0, frames[0])
+    x = np.array(frames[1].x)
+    x[3] = np.inf
+    with pytest.raises(ValueError, match="node 3.*refusing to write NaN"):
+        writer(1, frames[1].replace(x=x))
+    assert len(read_pc2(writer.pc2_path)[0]) == 1
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["frame.pc2", "frame_0000.obj"]
+
+
+def test_obj_write_failure_leaves_no_partial_file(tmp_path, model, anchored, monkeypatch):
+    frames = states(model, 2)
+    writer = BlenderWriter(tmp_path, anchored)
+    writer(0, frames[0])
+    from pathlib import Path
+
+    def fail(self, text):
+        Path.write_bytes(self, text[: len(text) // 2].encode())
+        raise OSError("disk full")
+
+    monkeypatch.setattr(Path, "write_text", fail)
+    with pytest.raises(OSError, match="disk full"):
+        writer(1, frames[1])
+    monkeypatch.undo()
+    assert leftovers(tmp_path) == [] and not (tmp_path / "frame_0001.obj").exists()
+    assert len(read_pc2(writer.pc2_path)[0]) == 1

@@ -1,0 +1,264 @@
+"""Blender output: the render surface per frame as an OBJ sequence and as one PC2 point cache.
+
+The render surface is either an anchored surface (``meshing.anchor.anchor(tet_mesh, surface)``,
+anything with ``deform(x) -> (p, 3)`` and ``faces``) or, by default, the boundary surface of
+the tet mesh (:class:`BoundarySurface`).
+
+Files in ``directory`` for a writer named ``NAME``:
+
+``NAME_0000.obj``, ``NAME_0001.obj``, ...
+    one Wavefront OBJ per frame (vertices and triangles), each written atomically.
+``NAME.pc2``
+    Blender's point cache: a 32-byte little-endian header ``b"POINTCACHE2\\0"``, int32 version 1,
+    int32 point count, float32 start frame, float32 sample rate, int32 sample count, then float32
+    x, y, z per point per sample (the layout Blender's Mesh Cache modifier reads, see
+    ``MOD_meshcache_pc2.cc``).
+
+PC2 validity. The cache is created atomically with zero samples; each frame appends its
+samples, flushes them to disk, and only then rewrites the header's sample count. A reader
+therefore sees the complete frames only, whenever the run dies; bytes of a frame cut short
+lie past the counted samples and are cut off by the next writer that resumes the file. This
+keeps every frame of a run that crashes, where a temporary file renamed at the end would keep
+none, at the cost of one in-place header update per frame.
+
+In Blender: import ``NAME_0000.obj`` with Forward = Y, Up = Z (coordinates as they are, z up)
+and the vertex order kept, then add a Mesh Cache modifier reading ``NAME.pc2`` (its default
+axes, Forward Y and Up Z, match).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from volspring._io import atomic_path
+
+__all__ = ["BlenderWriter", "BoundarySurface", "read_pc2"]
+
+logger = logging.getLogger(__name__)
+
+PC2_MAGIC = b"POINTCACHE2\0"
+#: magic, file version, point count, start frame, sample rate, sample count
+PC2_HEADER = struct.Struct("<12siiffi")
+_COUNT_OFFSET = PC2_HEADER.size - 4
+
+
+@dataclass(frozen=True, eq=False)
+class BoundarySurface:
+    """The boundary triangles of a tet mesh as a render surface (same interface as an Anchor).
+
+    Parameters
+    ----------
+    nodes : (p,) int64 -- the tet mesh nodes on the boundary, sorted
+    faces : (f, 3) int64 -- boundary triangles indexing ``nodes`` (outward normals)
+    node_count : int -- node count the deformed positions must have
+    """
+
+    nodes: np.ndarray
+    faces: np.ndarray
+    node_count: int
+
+    @classmethod
+    def from_mesh(cls, mesh) -> "BoundarySurface":
+        """The boundary surface of a TetMesh (or of a SpringModel's tet mesh)."""
+        if hasattr(mesh, "topology"):  # a SpringModel: its mesh nodes come first
+            if mesh.topology is None:
+                raise ValueError("the model has no tet mesh (built from arrays); give a render surface")
+            node_count = mesh.node_count
+            mesh = mesh.topology.mesh
+        else:
+            node_count = mesh.node_count
+        nodes = mesh.boundary_nodes
+        local = np.full(mesh.node_count, -1, dtype=np.int64)
+        local[nodes] = np.arange(len(nodes))
+        return cls(nodes, local[mesh.boundary_faces], node_count)
+
+    @property
+    def point_count(self) -> int:
+        return len(self.nodes)
+
+    def deform(self, x) -> np.ndarray:
+        """(p, 3) float -- the boundary vertices at tet node positions ``x`` (n, 3) [m]."""
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.node_count, 3):
+            raise ValueError(f"x must have shape ({self.node_count}, 3), got {x.shape}")
+        return x[self.nodes]
+
+
+def read_pc2(path):
+    """Read a PC2 point cache.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    samples : (k, p, 3) float32 -- the points of each of the header's k samples [m]
+    start : float -- start frame
+    rate : float -- sample rate (frames per sample)
+    """
+    path = Path(path)
+    data = path.read_bytes()
+    if len(data) < PC2_HEADER.size:
+        raise ValueError(f"{path} has {len(data)} bytes, fewer than a PC2 header ({PC2_HEADER.size})")
+    magic, version, points, start, rate, count = PC2_HEADER.unpack_from(data)
+    if magic != PC2_MAGIC:
+        raise ValueError(f"{path} is not a PC2 file: it starts with {magic!r}, expected {PC2_MAGIC!r}")
+    needed = PC2_HEADER.size + 12 * points * count
+    if len(data) < needed:
+        raise ValueError(f"{path}: the header counts {count} samples of {points} points ({needed} bytes), "
+                         f"but the file has {len(data)} bytes")
+    samples = np.frombuffer(data, dtype="<f4", count=3 * points * count, offset=PC2_HEADER.size)
+    return samples.reshape(count, points, 3), float(start), float(rate)
+
+
+class BlenderWriter:
+    """Write the render surface of each frame as OBJ files and one PC2 cache; a ``simulate`` callback.
+
+    Parameters
+    ----------
+    directory : path-like -- output folder, created if missing
+    surface : Anchor, BoundarySurface, TetMesh or SpringModel -- what to write: anything with
+        ``deform(x) -> (p, 3)`` and ``faces`` ((k, 3) int or None); a TetMesh or SpringModel
+        stands for its boundary surface
+    name : str -- file name prefix (see the module docstring)
+    obj : bool -- write the OBJ sequence (needs faces); default True
+    pc2 : bool -- write the PC2 cache; default True
+    start_frame : float -- PC2 start frame (Blender frame of the first sample), default 0
+    sample_rate : float -- PC2 frames per sample, default 1
+    first_frame : int -- resume an earlier run: keep its first ``first_frame`` samples and OBJ
+        files, and write the next frame as number ``first_frame``; 0 (default) starts afresh
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from volspring import TetMesh, State
+    >>> from volspring.output import BlenderWriter, read_pc2
+    >>> mesh = TetMesh([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]])
+    >>> writer = BlenderWriter(tempfile.mkdtemp(), mesh)
+    >>> writer(0, State(mesh.points, 0 * mesh.points))
+    >>> read_pc2(writer.pc2_path)[0].shape
+    (1, 4, 3)
+    """
+
+    def __init__(self, directory, surface, *, name="frame", obj=True, pc2=True, start_frame=0.0,
+                 sample_rate=1.0, first_frame=0):
+        if not hasattr(surface, "deform"):
+            surface = BoundarySurface.from_mesh(surface)
+        self.surface = surface
+        self.directory = Path(directory)
+        self.name = str(name)
+        if not self.name or "/" in self.name or "\\" in self.name:
+            raise ValueError(f"name = {name!r} must be a non-empty file name prefix without path separators")
+        self.obj, self.pc2 = bool(obj), bool(pc2)
+        if not (self.obj or self.pc2):
+            raise ValueError("obj=False and pc2=False: nothing to write")
+        faces = getattr(surface, "faces", None)
+        if self.obj and faces is None:
+            raise ValueError("the surface has no faces (anchored bare points): write pc2 only (obj=False)")
+        if self.obj:
+            # 1-based vertex indices; the faces never change, so their text is built once.
+            faces = np.asarray(faces, dtype=np.int64)
+            self._faces_text = ("f %d %d %d\n" * len(faces)) % tuple((faces + 1).ravel().tolist())
+        for value, label in ((start_frame, "start_frame"), (sample_rate, "sample_rate")):
+            if not np.isfinite(value):
+                raise ValueError(f"{label} = {value} is not finite")
+        self.start_frame, self.sample_rate = float(start_frame), float(sample_rate)
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self.frame_count = int(first_frame)
+        if self.frame_count < 0:
+            raise ValueError(f"first_frame = {first_frame} is not >= 0")
+        self._point_count = None
+        if self.pc2 and self.frame_count:
+            self._resume_pc2()
+
+    @property
+    def pc2_path(self) -> Path:
+        return self.directory / f"{self.name}.pc2"
+
+    def obj_path(self, frame: int) -> Path:
+        return self.directory / f"{self.name}_{frame:04d}.obj"
+
+    def __call__(self, frame_index, state):
+        """``simulate`` callback: write ``state`` as the next frame (``frame_index`` is not used)."""
+        self.write(state)
+
+    def write(self, state) -> int:
+        """Write the surface at ``state.x`` as the next frame.
+
+        Parameters
+        ----------
+        state : State -- positions ``x`` (n, 3) [m]
+
+        Returns
+        -------
+        int -- the number of the frame written
+
+        Raises
+        ------
+        ValueError
+            If the positions or the deformed surface hold NaN or Inf (nothing is written then).
+        """
+        x = np.asarray(state.x, dtype=np.float64)
+        bad = ~np.isfinite(x).all(axis=1)
+        if bad.any():
+            raise ValueError(f"frame {self.frame_count} (t = {float(state.t):.6g} s): {int(bad.sum())} node(s) "
+                             f"have non-finite positions, first is node {int(np.flatnonzero(bad)[0])}; "
+                             "refusing to write NaN or Inf")
+        points = np.asarray(self.surface.deform(x), dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():
+            raise ValueError(f"frame {self.frame_count}: the deformed surface must be finite of shape (p, 3), "
+                             f"got shape {points.shape}")
+        if self.obj:
+            with atomic_path(self.obj_path(self.frame_count)) as tmp:
+                # %.9g round-trips float32, the precision Blender keeps.
+                vertices = ("v %.9g %.9g %.9g\n" * len(points)) % tuple(points.ravel().tolist())
+                tmp.write_text(f"# volspring frame {self.frame_count}, t = {float(state.t)!r} s\n"
+                               + vertices + self._faces_text)
+        if self.pc2:
+            self._append_pc2(points)
+        self.frame_count += 1
+        return self.frame_count - 1
+
+    # ------------------------------------------------------------------ PC2
+    def _header(self, point_count, sample_count) -> bytes:
+        return PC2_HEADER.pack(PC2_MAGIC, 1, point_count, self.start_frame, self.sample_rate, sample_count)
+
+    def _append_pc2(self, points):
+        path = self.pc2_path
+        if self._point_count is None:  # a fresh cache: created atomically, with no sample yet
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(self._header(len(points), 0))
+            self._point_count = len(points)
+        if len(points) != self._point_count:
+            raise ValueError(f"frame {self.frame_count} has {len(points)} surface points, "
+                             f"the cache {path} holds {self._point_count}")
+        sample = points.astype("<f4").tobytes()
+        with open(path, "r+b") as file:
+            offset = PC2_HEADER.size + self.frame_count * len(sample)
+            file.seek(offset)
+            file.write(sample)
+            file.truncate()
+            file.flush()
+            os.fsync(file.fileno())
+            # Only now count the sample: a crash before this line leaves the previous count valid.
+            file.seek(_COUNT_OFFSET)
+            file.write(struct.pack("<i", self.frame_count + 1))
+            file.flush()
+
+    def _resume_pc2(self):
+        path = self.pc2_path
+        samples, _, _ = read_pc2(path)
+        if len(samples) < self.frame_count:
+            raise ValueError(f"cannot resume at frame {self.frame_count}: {path} holds {len(samples)} sample(s)")
+        self._point_count = samples.shape[1]
+        with open(path, "r+b") as file:
+            file.seek(_COUNT_OFFSET)
+            file.write(struct.pack("<i", self.frame_count))
+            file.truncate(PC2_HEADER.size + 12 * self._point_count * self.frame_count)

@@ -1,0 +1,255 @@
+"""ParaView output: one VTU per frame and a PVD collection with the real times.
+
+Layout of a series named ``NAME`` in ``directory``:
+
+``NAME.pvd`` and ``NAME_0000.vtu``, ``NAME_0001.vtu``, ...
+    the tet mesh at the deformed positions: point data ``displacement`` [m] and ``velocity``
+    [m/s], cell data ``volume_ratio`` (deformed / rest volume of each tet, < 0 when inverted).
+``NAME_springs.pvd`` and ``NAME_springs_0000.vtu``, ...
+    every spring as a ``line`` cell over all nodes (shell nodes included): point data
+    ``displacement`` and ``velocity``, cell data ``strain`` ((l - l0) / l0 [-]) and ``kind``
+    (index into :data:`volspring.SPRING_KINDS`).
+
+Tets and springs are two series rather than one file of mixed cells because ParaView colours a
+mixed grid by one cell array covering every cell: a spring strain would need a made-up value on
+each tet. Two series open cleanly (File > Open, select both ``.pvd``) and each is coloured by
+its own arrays; the time slider follows the PVD times in seconds.
+
+Every file is written atomically (temporary file, then rename), and the PVD is rewritten after
+the frame's VTU files are in place, so a run that dies at any point leaves PVD files that list
+complete frames only. A state holding NaN or Inf is refused: nothing is written for it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from volspring._io import atomic_path
+from volspring.mesh import signed_tet_volumes
+
+__all__ = ["ParaViewWriter", "read_pvd", "write_pvd"]
+
+logger = logging.getLogger(__name__)
+
+
+def write_pvd(path, entries) -> Path:
+    """Write a PVD collection atomically.
+
+    Parameters
+    ----------
+    path : path-like -- the ``.pvd`` file
+    entries : sequence of (float, str) -- (time [s], file name relative to the PVD's folder)
+
+    Returns
+    -------
+    Path -- ``path``
+    """
+    root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
+    collection = ET.SubElement(root, "Collection")
+    for time, file in entries:
+        # repr of a float round-trips exactly, so the times read back are the times written.
+        ET.SubElement(collection, "DataSet", timestep=repr(float(time)), group="", part="0", file=str(file))
+    ET.indent(root)
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        ET.ElementTree(root).write(tmp, encoding="utf-8", xml_declaration=True)
+    return path
+
+
+def read_pvd(path) -> list:
+    """The datasets of a PVD collection.
+
+    Parameters
+    ----------
+    path : path-like -- a ``.pvd`` file
+
+    Returns
+    -------
+    list of (float, Path) -- (time [s], absolute path of the dataset file), in file order
+
+    Raises
+    ------
+    ValueError
+        If the file is not a VTK collection.
+    """
+    path = Path(path)
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as error:
+        raise ValueError(f"{path} is not valid XML: {error}") from error
+    if root.tag != "VTKFile" or root.get("type") != "Collection" or root.find("Collection") is None:
+        raise ValueError(f"{path} is not a VTK collection (expected <VTKFile type=\"Collection\">)")
+    return [(float(item.get("timestep")), path.parent / item.get("file"))
+            for item in root.find("Collection").iter("DataSet")]
+
+
+class ParaViewWriter:
+    """Write a simulation as VTU frames plus PVD collections; usable as a ``simulate`` callback.
+
+    Parameters
+    ----------
+    directory : path-like -- output folder, created if missing
+    model : SpringModel -- the model being simulated; the tet series needs ``model.topology``
+        (a model built from arrays has springs only)
+    name : str -- file name prefix (see the module docstring for the layout)
+    springs : bool -- also write the spring series (default True)
+    first_frame : int -- resume an earlier series: keep its first ``first_frame`` frames (files
+        and PVD entries) and write the next frame as number ``first_frame``; 0 (default) starts
+        afresh. Raises if the existing PVD lists fewer frames.
+
+    Notes
+    -----
+    Frames are numbered by the writer itself, one per call, whatever frame index the caller
+    passes, so a resumed run continues the numbering. The writer returns None; ``simulate``
+    only stops on an explicit False.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from volspring import Material, Scene, SpringModel, TetMesh
+    >>> from volspring.output import ParaViewWriter
+    >>> mesh = TetMesh([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]])
+    >>> model = SpringModel.from_mesh(mesh, Material(E=1e5, nu=0.3, density=1000.0))
+    >>> writer = ParaViewWriter(tempfile.mkdtemp(), model)
+    >>> writer(0, Scene(model).initial_state())
+    >>> writer.frame_count, writer.pvd_path.name
+    (1, 'frame.pvd')
+    """
+
+    def __init__(self, directory, model, *, name="frame", springs=True, first_frame=0):
+        self.directory = Path(directory)
+        self.model = model
+        self.name = str(name)
+        if not self.name or "/" in self.name or "\\" in self.name:
+            raise ValueError(f"name = {name!r} must be a non-empty file name prefix without path separators")
+        self.mesh = model.topology.mesh if model.topology is not None else None
+        self.springs = bool(springs)
+        if self.mesh is None and not self.springs:
+            raise ValueError("the model has no tet mesh (built from arrays) and springs=False: nothing to write")
+        if self.mesh is not None:
+            self._rest_volumes = self.mesh.tet_volumes
+        self.directory.mkdir(parents=True, exist_ok=True)
+        self._entries = {"body": [], "springs": []}
+        first_frame = int(first_frame)
+        if first_frame < 0:
+            raise ValueError(f"first_frame = {first_frame} is not >= 0")
+        if first_frame:
+            for series in self._series():
+                kept = read_pvd(self._pvd(series))[:first_frame]
+                if len(kept) < first_frame:
+                    raise ValueError(f"cannot resume at frame {first_frame}: {self._pvd(series)} lists "
+                                     f"{len(kept)} frame(s)")
+                self._entries[series] = [(time, file.name) for time, file in kept]
+            for series in self._series():  # drop frames of the earlier run past the resume point
+                write_pvd(self._pvd(series), self._entries[series])
+        self.frame_count = first_frame
+        self.times = [time for time, _ in self._entries[self._series()[0]]]
+
+    # ------------------------------------------------------------------ paths
+    @property
+    def pvd_path(self) -> Path:
+        """The collection of the tet series (of the spring series for a model without tets)."""
+        return self._pvd(self._series()[0])
+
+    @property
+    def springs_pvd_path(self) -> Path | None:
+        """The collection of the spring series, or None when springs are not written."""
+        return self._pvd("springs") if self.springs else None
+
+    def _series(self):
+        return (["body"] if self.mesh is not None else []) + (["springs"] if self.springs else [])
+
+    def _stem(self, series):
+        return self.name if series == "body" else f"{self.name}_springs"
+
+    def _pvd(self, series) -> Path:
+        return self.directory / f"{self._stem(series)}.pvd"
+
+    # ------------------------------------------------------------------ writing
+    def __call__(self, frame_index, state):
+        """``simulate`` callback: write ``state`` as the next frame (``frame_index`` is not used)."""
+        self.write(state)
+
+    def write(self, state) -> int:
+        """Write ``state`` as the next frame, then rewrite the PVD files.
+
+        Parameters
+        ----------
+        state : State -- positions ``x`` (n, 3) [m], velocities ``v`` (n, 3) [m/s], time ``t`` [s]
+
+        Returns
+        -------
+        int -- the number of the frame written
+
+        Raises
+        ------
+        ValueError
+            If the state does not fit the model, holds NaN or Inf, or its time is not after the
+            previous frame's. Nothing is written then.
+        """
+        x, v, t = _checked_state(state, self.model.node_count, self.frame_count)
+        if self.times and not t > self.times[-1]:
+            raise ValueError(f"frame {self.frame_count} has t = {t!r} s, not after the previous frame's "
+                             f"t = {self.times[-1]!r} s")
+        displacement = x - self.model.rest_positions
+        files = {}
+        try:
+            self._write_frame(x, v, displacement, files)
+        except BaseException:
+            for path in files.values():  # complete files of a frame never listed: remove them
+                path.unlink(missing_ok=True)
+            raise
+        for series, file in files.items():
+            self._entries[series].append((t, file.name))
+            write_pvd(self._pvd(series), self._entries[series])
+        self.times.append(t)
+        self.frame_count += 1
+        logger.debug("wrote frame %d (t = %g s) to %s", self.frame_count - 1, t, self.directory)
+        return self.frame_count - 1
+
+    def _write_frame(self, x, v, displacement, files):
+        from volspring.springs import spring_strains
+
+        if self.mesh is not None:
+            n = self.mesh.node_count
+            ratio = signed_tet_volumes(x, self.mesh.tets) / self._rest_volumes
+            files["body"] = self._write_vtu(
+                "body", x[:n], [("tetra", self.mesh.tets)],
+                point_data={"displacement": displacement[:n], "velocity": v[:n]},
+                cell_data={"volume_ratio": [ratio]})
+        if self.springs:
+            strain = spring_strains(self.model, x) if self.model.spring_count else np.zeros(0)
+            files["springs"] = self._write_vtu(
+                "springs", x, [("line", self.model.springs)],
+                point_data={"displacement": displacement, "velocity": v},
+                cell_data={"strain": [strain], "kind": [self.model.kinds.astype(np.int32)]})
+
+    def _write_vtu(self, series, points, cells, *, point_data, cell_data) -> Path:
+        import meshio
+
+        path = self.directory / f"{self._stem(series)}_{self.frame_count:04d}.vtu"
+        with atomic_path(path) as tmp:
+            meshio.write(tmp, meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data),
+                         file_format="vtu")
+        return path
+
+
+def _checked_state(state, node_count, frame):
+    """(x, v, t) of a state, after checking shapes and that everything is finite."""
+    x = np.asarray(state.x, dtype=np.float64)
+    v = np.asarray(state.v, dtype=np.float64)
+    t = float(state.t)
+    if x.shape != (node_count, 3) or v.shape != (node_count, 3):
+        raise ValueError(f"frame {frame}: x and v must have shape ({node_count}, 3), got {x.shape} and {v.shape}")
+    if not math.isfinite(t):
+        raise ValueError(f"frame {frame}: t = {t} s is not finite; refusing to write it")
+    bad = ~(np.isfinite(x).all(axis=1) & np.isfinite(v).all(axis=1))
+    if bad.any():
+        raise ValueError(f"frame {frame} (t = {t:.6g} s): {int(bad.sum())} node(s) have non-finite positions or "
+                         f"velocities, first is node {int(np.flatnonzero(bad)[0])}; refusing to write NaN or Inf")
+    return x, v, t
