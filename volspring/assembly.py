@@ -1,0 +1,234 @@
+"""The fixed 3x3 block sparsity pattern of the implicit system and its refill.
+
+For a spring model and a set of free nodes the matrix
+
+    A = M - h dF/dv - h^2 dF/dx
+
+has one 3x3 diagonal block per free node and one off-diagonal block per spring each way
+(springs with both ends free). With the per-spring block W_e = h^2 H_e + h D_e
+(``H`` from :func:`volspring.springs.spring_stiffness_blocks`, ``D`` from
+:func:`volspring.springs.damper_blocks`), spring e = (i, j) adds +W_e to the diagonal blocks
+of i and j and -W_e to the blocks (i, j) and (j, i); the mass adds m_i I to block (i, i).
+
+:class:`BlockPattern` builds this pattern and a scatter map once per model and pin set; each
+step only refills the BSR data array with one sparse-times-dense product, no COO rebuild.
+Pinned (and prescribed) nodes are eliminated: the pattern spans the free nodes only
+(``3 * free_count`` unknowns) and their coupling to prescribed motion goes into the
+right-hand side (:meth:`BlockPattern.boundary_coupling`).
+
+Free unknowns are ordered node-major: unknown ``3 k + c`` is component c of free node
+``free_nodes[k]``, so ``vector.reshape(-1, 3)`` gives per-node rows.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from volspring.springs import _directions
+
+__all__ = ["BlockPattern", "system_blocks", "rigid_body_modes"]
+
+
+class BlockPattern:
+    """BSR pattern of the implicit system over the free nodes, and its scatter map.
+
+    Parameters
+    ----------
+    model : SpringModel
+    free : (n,) bool, optional -- nodes that are unknowns; all nodes when omitted
+
+    Attributes
+    ----------
+    free_nodes : (f,) int -- model node index of each free node
+    node_index : (n,) int -- free index of each model node, -1 for fixed nodes
+    size : int -- number of unknowns, 3 f
+    boundary_springs : (b,) int -- springs with exactly one free end
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volspring import SpringModel
+    >>> from volspring.assembly import BlockPattern
+    >>> chain = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [1.0, 1.0, 1.0],
+    ...                                 [[0, 1], [1, 2]], stiffness=10.0)
+    >>> pattern = BlockPattern(chain, free=np.array([False, True, True]))
+    >>> blocks = np.broadcast_to(np.eye(3), (2, 3, 3))
+    >>> pattern.matrix(blocks, chain.masses[pattern.free_nodes]).toarray()[0, :4]
+    array([ 3.,  0.,  0., -1.])
+    """
+
+    def __init__(self, model, free=None):
+        n = model.node_count
+        free = np.ones(n, dtype=bool) if free is None else np.asarray(free, dtype=bool)
+        if free.shape != (n,):
+            raise ValueError(f"free must have shape ({n},), got {free.shape}")
+        self.model = model
+        self.free = free.copy()
+        self.free_nodes = np.flatnonzero(free)
+        self.node_index = np.full(n, -1, dtype=np.int64)
+        self.node_index[self.free_nodes] = np.arange(len(self.free_nodes))
+        f = len(self.free_nodes)
+        self.size = 3 * f
+
+        a, b = self.node_index[model.springs.T]
+        s = model.spring_count
+        spring_ids = np.arange(s)
+        both = (a >= 0) & (b >= 0)
+        self.boundary_springs = np.flatnonzero((a >= 0) != (b >= 0))
+        # (row, col, spring, sign) of every block contribution of every spring.
+        rows = np.concatenate([a, b, a[both], b[both]])
+        cols = np.concatenate([a, b, b[both], a[both]])
+        owner = np.concatenate([spring_ids, spring_ids, spring_ids[both], spring_ids[both]])
+        sign = np.concatenate([np.ones(2 * s), -np.ones(2 * both.sum())])
+        keep = rows >= 0
+        rows, cols, owner, sign = rows[keep], cols[keep], owner[keep], sign[keep]
+        # Every free node has a diagonal block even when no spring touches it (mass only).
+        rows = np.concatenate([np.arange(f), rows])
+        cols = np.concatenate([np.arange(f), cols])
+        key = rows * max(f, 1) + cols
+        unique_keys, block_of = np.unique(key, return_inverse=True)
+        block_rows, block_cols = unique_keys // max(f, 1), unique_keys % max(f, 1)
+        self.block_count = len(unique_keys)
+        self.indices = block_cols.astype(np.int32)
+        self.indptr = np.searchsorted(block_rows, np.arange(f + 1)).astype(np.int32)
+        self.diagonal_blocks = block_of[:f]
+        # Scatter map: block data (nnzb, 9) = summation (nnzb, s) @ spring blocks (s, 9).
+        self.summation = sp.csr_matrix((sign, (block_of[f:], owner)), shape=(self.block_count, s))
+        self.summation.sum_duplicates()
+
+    @property
+    def free_count(self) -> int:
+        return len(self.free_nodes)
+
+    def data(self, spring_blocks, diagonal=None, *, out=None) -> np.ndarray:
+        """The BSR data array, (nnzb, 3, 3), for the given blocks.
+
+        Parameters
+        ----------
+        spring_blocks : (s, 3, 3) float -- W_e of every spring (all springs of the model)
+        diagonal : (f,) or (f, 3) or (f, 3, 3) float, optional -- added to the diagonal block of
+            each free node: a scalar times I (e.g. the masses), a diagonal, or a full block
+        out : (nnzb, 3, 3) float, optional -- written in place
+        """
+        data = (self.summation @ spring_blocks.reshape(-1, 9)).reshape(-1, 3, 3)
+        if diagonal is not None:
+            diagonal = np.asarray(diagonal, dtype=np.float64)
+            d = self.diagonal_blocks
+            if diagonal.ndim == 3:
+                data[d] += diagonal
+            else:
+                c = np.arange(3)
+                data[d[:, None], c, c] += diagonal[:, None] if diagonal.ndim == 1 else diagonal
+        if out is not None:
+            out[...] = data
+            return out
+        return data
+
+    def matrix(self, spring_blocks, diagonal=None) -> sp.bsr_matrix:
+        """(3f, 3f) BSR matrix with block size 3 sharing this pattern's index arrays."""
+        return self.wrap(self.data(spring_blocks, diagonal))
+
+    def wrap(self, data) -> sp.bsr_matrix:
+        """A BSR matrix around a data array of this pattern (no copy, no format check)."""
+        matrix = sp.bsr_matrix((data, self.indices, self.indptr), shape=(self.size, self.size), copy=False)
+        return matrix
+
+    def restrict(self, vectors) -> np.ndarray:
+        """(3f,) float -- the free nodes' rows of a per-node array (n, 3), flattened."""
+        return np.ascontiguousarray(vectors[self.free_nodes]).ravel()
+
+    def free_dofs(self) -> np.ndarray:
+        """(3f,) int -- model unknown index (3 node + component) of every free unknown."""
+        return (3 * self.free_nodes[:, None] + np.arange(3)).ravel()
+
+    def boundary_coupling(self, spring_blocks, prescribed) -> np.ndarray:
+        """(n, 3) float -- -A_fp u_p: what prescribed values on fixed nodes add to the right-hand side.
+
+        Parameters
+        ----------
+        spring_blocks : (s, 3, 3) float -- W_e of every spring
+        prescribed : (n, 3) float -- values on the fixed nodes (rows of free nodes are ignored)
+
+        Only the free nodes' rows of the result are meaningful.
+        """
+        model = self.model
+        out = np.zeros((model.node_count, 3))
+        e = self.boundary_springs
+        if e.size == 0:
+            return out
+        i, j = model.springs[e].T
+        u = np.where(self.free[:, None], 0.0, prescribed)
+        coupling = np.einsum("eab,eb->ea", spring_blocks[e], u[j] - u[i])
+        np.add.at(out, i, coupling)
+        np.add.at(out, j, -coupling)
+        return out
+
+
+def system_blocks(model, x, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
+    """Per-spring blocks c_K H_e + c_D D_e in one pass, and what the right-hand side needs.
+
+    Equal to ``stiffness_scale * spring_stiffness_blocks(model, x) + damping_scale *
+    damper_blocks(model, x)`` but computed from the scalar coefficients of r r^T and I, so the
+    (s, 3, 3) array is written once.
+
+    Parameters
+    ----------
+    model : SpringModel
+    x : (n, 3) float -- positions [m]
+    stiffness_scale : float -- c_K (h^2 [s^2] for the implicit step, 1 for statics)
+    damping_scale : float -- c_D (h [s] for the implicit step)
+    clamp_compression : bool -- clamp the transverse term (1 - l0/l) at 0
+
+    Returns
+    -------
+    blocks : (s, 3, 3) float -- W_e
+    directions : (s, 3) float -- unit vectors r_e from i to j
+    axial : (s,) float -- k_e (the coefficient of r r^T in H_e) [N/m]
+    transverse : (s,) float -- k_e (1 - l0/l), clamped if asked (the coefficient of the
+        transverse projector in H_e) [N/m]
+    """
+    r, length = _directions(model, x)
+    transverse = 1.0 - model.rest_lengths / length
+    if clamp_compression:
+        np.maximum(transverse, 0.0, out=transverse)
+    transverse *= model.stiffness
+    along = stiffness_scale * (model.stiffness - transverse)
+    if damping_scale:
+        along += damping_scale * model.damping
+    blocks = r[:, :, None] * (along[:, None] * r)[:, None, :]
+    blocks[:, [0, 1, 2], [0, 1, 2]] += (stiffness_scale * transverse)[:, None]
+    return blocks, r, model.stiffness, transverse
+
+
+def stiffness_times(model, directions, axial, transverse, u) -> np.ndarray:
+    """(n, 3) float -- dF/dx @ u for the spring part, from :func:`system_blocks` output [N].
+
+    H_e (u_j - u_i) = (k - k_t) r (r . du) + k_t du with k_t the transverse coefficient, added
+    to node i and subtracted from node j.
+    """
+    i, j = model.springs.T
+    du = u[j] - u[i]
+    along = (axial - transverse) * np.einsum("ij,ij->i", directions, du)
+    per_spring = along[:, None] * directions + transverse[:, None] * du
+    return model.incidence @ per_spring
+
+
+def rigid_body_modes(points) -> np.ndarray:
+    """(3p, 6) float -- translations and infinitesimal rotations of the given points.
+
+    Columns: unit translations along x, y, z, then rotations about axes through the centroid,
+    scaled to the points' spread so all six columns have comparable norms (the near-null space
+    ``B`` handed to smoothed aggregation).
+    """
+    p = np.asarray(points, dtype=np.float64)
+    q = p - p.mean(axis=0)
+    scale = np.sqrt((q * q).sum(axis=1).mean()) or 1.0
+    q = q / scale
+    modes = np.zeros((len(p), 3, 6))
+    modes[:, [0, 1, 2], [0, 1, 2]] = 1.0
+    # omega x q for omega = e_x, e_y, e_z
+    modes[:, 1, 3], modes[:, 2, 3] = -q[:, 2], q[:, 1]
+    modes[:, 0, 4], modes[:, 2, 4] = q[:, 2], -q[:, 0]
+    modes[:, 0, 5], modes[:, 1, 5] = -q[:, 1], q[:, 0]
+    return modes.reshape(-1, 6)

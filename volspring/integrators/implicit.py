@@ -1,0 +1,331 @@
+"""Implicit (backward) Euler, linearised once per step (Baraff & Witkin 1998), with optional Newton.
+
+One step of size h from (x0, v0) solves, over the free nodes only,
+
+    (M - h dF/dv - h^2 dF/dx) dv = h (f0 + h dF/dx v0) - A_fp dv_p,    v1 = v0 + dv,  x1 = x0 + h v1,
+
+with dF/dx from the spring stiffness blocks (transverse term clamped under compression so the
+matrix stays positive definite), dF/dv from the dampers, plus the Jacobians of scene forces that
+provide one (e.g. ``Drag``); forces without one (gravity, fields) enter through f0 only.
+Pinned and prescribed nodes are eliminated: their velocity change dv_p is set by where the pins
+must be at t + h, and their coupling moves to the right-hand side. Every mode is damped by
+1/sqrt(1 + h^2 omega^2) per step, so the scheme is stable for any h (first order accurate).
+
+Linear solve. The default ``solver="amg"`` is CG preconditioned with smoothed aggregation on
+the 3x3 block matrix with the rigid-body modes of the free nodes as near-null space
+(:mod:`volspring.solvers`), warm started from the previous step's dv. ``rtol=1e-3`` by default:
+the linearisation itself makes an O(h^2) error per step, so a linear residual of 1e-3 of the
+right-hand side is already below the scheme's own error at any step size where implicit Euler
+is used for its stability; the error does not accumulate into instability because every step
+solves for a new dv from the actual state. Use ``rtol=1e-6`` or ``solver="direct"`` for
+checking, and ``newton_iterations`` for the fully implicit answer.
+
+Hierarchy policy. The AMG hierarchy is built from the step's own matrix and reused while it
+still works. It is rebuilt at the start of a step when
+
+- there is none yet, or the pattern changed (another model or pin set);
+- the previous step needed more than ``rebuild_growth`` x max(5, n0) CG iterations, where n0
+  is the iteration count of the step right after the last build;
+- ``rebuild_every`` steps passed since the last build (off by default);
+- dt differs from the build's dt by more than 25 %.
+
+What the policy reads is kept in ``state.memory`` (keys ``implicit_euler.*``): the warm start,
+the last iteration count, and the step, time, dt, positions and velocities at which the
+hierarchy was built, so a run resumed from a checkpoint rebuilds the very same hierarchy from
+those positions and continues bit-identically.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from volspring.assembly import BlockPattern, rigid_body_modes, stiffness_times, system_blocks
+from volspring.integrators.base import Integrator
+from volspring.scene import Scene, State
+from volspring.solvers import LINEAR_SOLVERS, SolveInfo, make_linear_solver
+
+__all__ = ["ImplicitEuler", "ImplicitStepInfo"]
+
+logger = logging.getLogger(__name__)
+
+_KEY = "implicit_euler."
+
+
+@dataclass(frozen=True)
+class ImplicitStepInfo:
+    """What one implicit step did (``integrator.last_solve``).
+
+    Parameters
+    ----------
+    iterations : int -- CG iterations of the linearised solve (0 for the direct solver)
+    residual : float -- its relative residual [-]
+    solves : tuple of SolveInfo -- the linearised solve, then one per Newton iteration
+    newton_residuals : (k + 1,) float -- ||M (v1 - v0) - h F(x1, v1, t + h)|| over the free
+        nodes [N s] after the linearised solve and after each Newton iteration
+    forces_seconds, assembly_seconds, setup_seconds, solve_seconds : float -- where the time went [s]
+    rebuilt : bool -- the AMG hierarchy was (re)built in this step
+    """
+
+    iterations: int
+    residual: float
+    solves: tuple
+    newton_residuals: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    forces_seconds: float = 0.0
+    assembly_seconds: float = 0.0
+    setup_seconds: float = 0.0
+    solve_seconds: float = 0.0
+    rebuilt: bool = False
+
+
+@dataclass
+class _System:
+    """The assembled implicit system at one (x, v, t, h) over the free nodes."""
+
+    matrix: sp.bsr_matrix
+    extra: sp.csr_matrix | None
+    blocks: np.ndarray  # (s, 3, 3) h^2 H + h D
+    directions: np.ndarray
+    axial: np.ndarray
+    transverse: np.ndarray
+    extra_full: sp.csr_matrix | None  # -h dF/dv - h^2 dF/dx of scene forces, all unknowns
+    extra_dfdx: sp.csr_matrix | None  # dF/dx of scene forces, all unknowns
+
+
+class ImplicitEuler(Integrator):
+    """Linearised backward Euler with an AMG-preconditioned CG (or Jacobi-CG, or direct) solve.
+
+    Parameters
+    ----------
+    solver : {"amg", "jacobi", "direct"} -- linear solver (see :mod:`volspring.solvers`)
+    rtol : float -- CG relative residual target (see the module docstring for why 1e-3)
+    maxiter : int -- CG iteration cap per solve
+    newton_iterations : int -- extra Newton iterations on the nonlinear backward Euler equation
+        M (v1 - v0) = h F(x0 + h v1, v1, t + h) after the linearised step (0: Baraff-Witkin)
+    rebuild_growth : float -- rebuild the AMG hierarchy when the iteration count exceeds this
+        factor times max(5, the count right after the last build)
+    rebuild_every : int, optional -- also rebuild every this many steps
+    clamp_compression : bool -- clamp the transverse stiffness of compressed springs at 0
+    on_failure : {"raise", "warn"} -- what a solve that stops short of ``rtol`` does
+    smoother : {"gauss_seidel", "jacobi"} -- AMG smoother
+
+    Attributes
+    ----------
+    last_solve : ImplicitStepInfo or None -- what the last step did
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volspring import Gravity, Pins, Scene, SpringModel
+    >>> from volspring.integrators.implicit import ImplicitEuler
+    >>> string = SpringModel.from_arrays([[0, 0, 0], [0, 0, -1]], [1.0, 1.0], [[0, 1]], stiffness=1e6)
+    >>> scene = Scene(string, forces=[Gravity(string.masses)], pins=Pins([0]))
+    >>> integrator = ImplicitEuler(solver="direct")
+    >>> state = scene.initial_state()
+    >>> for _ in range(200):
+    ...     state = integrator.step(scene, state, 0.01)
+    >>> round(float(state.x[1, 2]) + 1.0, 8)  # static extension m g / k
+    -9.81e-06
+    """
+
+    name = "implicit_euler"
+    order = 1
+    explicit = False
+    stability_limit = math.inf
+
+    def __init__(self, *, solver="amg", rtol=1e-3, maxiter=500, newton_iterations=0, rebuild_growth=2.0,
+                 rebuild_every=None, clamp_compression=True, on_failure="raise", smoother="gauss_seidel"):
+        if solver not in LINEAR_SOLVERS:
+            raise ValueError(f"unknown solver {solver!r}; known: {', '.join(LINEAR_SOLVERS)}")
+        if int(newton_iterations) < 0:
+            raise ValueError(f"newton_iterations = {newton_iterations!r} is not >= 0")
+        if not rebuild_growth > 1:
+            raise ValueError(f"rebuild_growth = {rebuild_growth!r} is not > 1")
+        if rebuild_every is not None and int(rebuild_every) < 1:
+            raise ValueError(f"rebuild_every = {rebuild_every!r} is not >= 1")
+        options = {"on_failure": on_failure}
+        if solver != "direct":
+            options.update(rtol=rtol, maxiter=maxiter)
+        if solver == "amg":
+            options.update(smoother=smoother)
+        self.solver = make_linear_solver(solver, **options)
+        self.method, self.rtol = solver, float(rtol)
+        self.newton_iterations = int(newton_iterations)
+        self.rebuild_growth = float(rebuild_growth)
+        self.rebuild_every = None if rebuild_every is None else int(rebuild_every)
+        self.clamp_compression = bool(clamp_compression)
+        self.last_solve = None
+        self._pattern = None
+        self._hierarchy_record = None  # (pattern, step, t, dt, x) the current hierarchy was built from
+
+    def __repr__(self) -> str:
+        return (f"ImplicitEuler(solver={self.method!r}, rtol={self.rtol:g}, "
+                f"newton_iterations={self.newton_iterations})")
+
+    # ------------------------------------------------------------------ assembly
+    def pattern(self, scene: Scene) -> BlockPattern:
+        """The block pattern for this scene's model and pins, built once and cached."""
+        cached = self._pattern
+        if cached is None or cached.model is not scene.model or not np.array_equal(cached.free, scene.free):
+            self._pattern = BlockPattern(scene.model, scene.free)
+            self._hierarchy_record = None
+        return self._pattern
+
+    def _assemble(self, scene, pattern, x, v, t, h) -> _System:
+        blocks, directions, axial, transverse = system_blocks(
+            scene.model, x, stiffness_scale=h * h, damping_scale=h, clamp_compression=self.clamp_compression)
+        dfdx = dfdv = None
+        for force in scene.forces:
+            jacobian = getattr(force, "jacobian", None)
+            if jacobian is None:
+                continue
+            jx, jv = jacobian(x, v, t)
+            if jx is not None:
+                dfdx = jx if dfdx is None else dfdx + jx
+            if jv is not None:
+                dfdv = jv if dfdv is None else dfdv + jv
+        diagonal = scene.model.masses[pattern.free_nodes]
+        extra = extra_full = None
+        if dfdx is not None or dfdv is not None:
+            terms = [-h * dfdv if dfdv is not None else None, -h * h * dfdx if dfdx is not None else None]
+            extra_full = sp.csr_matrix(sum(term for term in terms if term is not None))
+            dofs = pattern.free_dofs()
+            restricted = extra_full[dofs][:, dofs].tocoo()
+            if (restricted.row == restricted.col).all():
+                # A diagonal term (e.g. drag) is folded into the diagonal blocks, so the AMG
+                # hierarchy sees it too and CG pays nothing extra.
+                folded = np.zeros(pattern.size)
+                np.add.at(folded, restricted.row, restricted.data)
+                diagonal = diagonal[:, None] + folded.reshape(-1, 3)
+            else:
+                extra = restricted.tocsr()
+        matrix = pattern.matrix(blocks, diagonal)
+        return _System(matrix, extra, blocks, directions, axial, transverse, extra_full,
+                       None if dfdx is None else sp.csr_matrix(dfdx))
+
+    # ------------------------------------------------------------------ hierarchy policy
+    def _needs_rebuild(self, memory, pattern, step, dt) -> str:
+        """Why the hierarchy must be rebuilt at the start of this step ('' when it need not)."""
+        if _KEY + "amg_step" not in memory:
+            return "first build"
+        if memory[_KEY + "amg_x"].shape != (pattern.model.node_count, 3) or \
+                memory[_KEY + "dv"].shape != (pattern.size,):
+            return "pattern changed"
+        reference = max(5, int(memory[_KEY + "amg_iterations"]))
+        if int(memory.get(_KEY + "iterations", 0)) > self.rebuild_growth * reference:
+            return f"iterations {int(memory[_KEY + 'iterations'])} > {self.rebuild_growth:g} x {reference}"
+        if self.rebuild_every is not None and step - int(memory[_KEY + "amg_step"]) >= self.rebuild_every:
+            return f"every {self.rebuild_every} steps"
+        if not 0.8 <= dt / float(memory[_KEY + "amg_dt"]) <= 1.25:
+            return f"dt changed from {float(memory[_KEY + 'amg_dt']):.3g} s to {dt:.3g} s"
+        return ""
+
+    def _hierarchy_matches(self, memory, pattern) -> bool:
+        record = self._hierarchy_record
+        if record is None or self.solver.hierarchy is None or record[0] is not pattern:
+            return False
+        return (record[1] == int(memory[_KEY + "amg_step"]) and record[2] == float(memory[_KEY + "amg_t"])
+                and record[3] == float(memory[_KEY + "amg_dt"]) and np.array_equal(record[4], memory[_KEY + "amg_x"])
+                and np.array_equal(record[5], memory[_KEY + "amg_v"]))
+
+    def _build(self, scene, pattern, system, x, step, t, dt, v):
+        seconds = self.solver.build(system.matrix, rigid_body_modes(x[pattern.free_nodes]))
+        self._hierarchy_record = (pattern, int(step), float(t), float(dt), x.copy(), v.copy())
+        return seconds
+
+    # ------------------------------------------------------------------ the step
+    def advance(self, scene: Scene, state: State, dt: float) -> State:
+        h = float(dt)
+        model = scene.model
+        memory = dict(state.memory)
+        x0, v0, t0 = state.x, state.v, state.t
+        pattern = self.pattern(scene)
+
+        clock = time.perf_counter()
+        f0 = scene.forces_at(x0, v0, t0)
+        forces_seconds = time.perf_counter() - clock
+
+        clock = time.perf_counter()
+        system = self._assemble(scene, pattern, x0, v0, t0, h)
+        # Velocity change of the prescribed nodes: where the pins must be at t + h.
+        v1 = v0.copy()
+        dv_prescribed = np.zeros_like(v0)
+        if scene.pins is not None:
+            nodes = scene.pins.nodes
+            v1[nodes] = (scene.pins.positions(model.rest_positions, t0 + h) - x0[nodes]) / h
+            dv_prescribed[nodes] = v1[nodes] - v0[nodes]
+        rhs = h * f0 + (h * h) * stiffness_times(model, system.directions, system.axial, system.transverse, v0)
+        if system.extra_dfdx is not None:
+            rhs += (h * h) * (system.extra_dfdx @ v0.ravel()).reshape(-1, 3)
+        if scene.pins is not None and dv_prescribed.any():
+            rhs += pattern.boundary_coupling(system.blocks, dv_prescribed)
+            if system.extra_full is not None:
+                rhs -= (system.extra_full @ dv_prescribed.ravel()).reshape(-1, 3)
+        b = pattern.restrict(rhs)
+        assembly_seconds = time.perf_counter() - clock
+
+        setup_seconds, rebuilt = 0.0, False
+        if self.method == "amg" and pattern.size:
+            reason = self._needs_rebuild(memory, pattern, state.step, h)
+            if reason:
+                logger.debug("step %d: rebuilding the AMG hierarchy (%s)", state.step, reason)
+                setup_seconds = self._build(scene, pattern, system, x0, state.step, t0, h, v0)
+                rebuilt = True
+                memory.update({_KEY + "amg_step": int(state.step), _KEY + "amg_t": float(t0),
+                               _KEY + "amg_dt": h, _KEY + "amg_x": x0.copy(), _KEY + "amg_v": v0.copy()})
+            elif not self._hierarchy_matches(memory, pattern):
+                # Resumed from a checkpoint (or another run used this integrator): rebuild the
+                # hierarchy exactly as it was built, from the recorded state.
+                x_b, v_b = memory[_KEY + "amg_x"], memory[_KEY + "amg_v"]
+                t_b, h_b = float(memory[_KEY + "amg_t"]), float(memory[_KEY + "amg_dt"])
+                old = self._assemble(scene, pattern, x_b, v_b, t_b, h_b)
+                setup_seconds = self._build(scene, pattern, old, x_b, memory[_KEY + "amg_step"], t_b, h_b, v_b)
+
+        warm = memory.get(_KEY + "dv")
+        warm = warm if warm is not None and warm.shape == (pattern.size,) else None
+        solves = []
+        if pattern.size:
+            dv, info = self._solve(system, b, warm)
+            solves.append(info)
+        else:
+            dv = np.zeros(0)
+            solves.append(SolveInfo(self.method, 0, 0.0, True, self.rtol))
+        v1[pattern.free_nodes] += dv.reshape(-1, 3)
+        x1 = x0 + h * v1
+
+        newton_residuals = []
+        if self.newton_iterations and pattern.size:
+            newton_residuals.append(self._newton_residual(scene, pattern, state, v1, x1, h))
+            for _ in range(self.newton_iterations):
+                jacobian = self._assemble(scene, pattern, x1, v1, t0 + h, h)
+                delta, info = self._solve(jacobian, -newton_residuals[-1][1], None)
+                solves.append(info)
+                v1[pattern.free_nodes] += delta.reshape(-1, 3)
+                x1 = x0 + h * v1
+                newton_residuals.append(self._newton_residual(scene, pattern, state, v1, x1, h))
+            newton_residuals = [norm for norm, _ in newton_residuals]
+
+        first = solves[0]
+        if rebuilt or _KEY + "amg_iterations" not in memory:
+            memory[_KEY + "amg_iterations"] = int(first.iterations)
+        memory.update({_KEY + "dv": dv, _KEY + "iterations": int(first.iterations),
+                       _KEY + "residual": float(first.residual)})
+        self.last_solve = ImplicitStepInfo(
+            int(first.iterations), float(first.residual), tuple(solves), np.asarray(newton_residuals, dtype=float),
+            forces_seconds, assembly_seconds, setup_seconds, sum(info.solve_seconds for info in solves), rebuilt)
+        return State(x1, v1, t0 + h, state.step + 1, memory)
+
+    def _solve(self, system, b, warm):
+        return self.solver.solve(system.matrix, b, x0=warm, extra=system.extra)
+
+    def _newton_residual(self, scene, pattern, state, v1, x1, h):
+        """(norm, vector) of M (v1 - v0) - h F(x1, v1, t + h) over the free unknowns."""
+        force = scene.forces_at(x1, v1, state.t + h)
+        residual = scene.model.masses[:, None] * (v1 - state.v) - h * force
+        vector = pattern.restrict(residual)
+        return float(np.linalg.norm(vector)), vector
