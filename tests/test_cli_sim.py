@@ -1,0 +1,160 @@
+"""``volspring-sim`` called through ``main([...])``: files produced, resume, and one-line errors."""
+
+import re
+
+import meshio
+import numpy as np
+import pytest
+
+from volspring.checkpoint import load_checkpoint
+from volspring.cli import main
+from volspring.output import read_pc2, read_pvd
+
+from conftest import cube_mesh
+
+# A 0.2 m x 0.05 m x 0.05 m box of 4 x 1 x 1 Kuhn cells, clamped at x = 0: tiny and mesher-free.
+PIN_END = ["--pin", "-1,-1,-1,0,1,1"]
+FAST = ["--dt", "0.005", "--frame-dt", "0.01"]
+
+
+@pytest.fixture(scope="module")
+def beam_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("mesh") / "beam.vtu"
+    cube_mesh((4, 1, 1), size=(0.2, 0.05, 0.05)).write(path)
+    return path
+
+
+def run(capsys, *argv):
+    status = main([str(arg) for arg in argv])
+    out, err = capsys.readouterr()
+    return status, out, err
+
+
+def test_a_run_writes_frames_surface_and_checkpoint(tmp_path, capsys, beam_file):
+    status, out, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.05", "--out", tmp_path,
+                           "--blender", "--checkpoint-every", "2", "--no-progress")
+    assert status == 0, err
+    assert err == ""
+    entries = read_pvd(tmp_path / "frame.pvd")
+    # Frames at 0, 0.01, ..., 0.05: six of them; times agree with frame_dt up to the round-off of t += dt.
+    np.testing.assert_allclose([time for time, _ in entries], np.arange(6) * 0.01, rtol=0, atol=1e-12)
+    last = meshio.read(entries[-1][1])
+    assert np.isfinite(last.points).all()
+    pinned = np.isclose(last.points[:, 0] - last.point_data["displacement"][:, 0], 0.0)
+    assert np.abs(last.point_data["displacement"][pinned]).max() == 0.0  # pinned nodes never move
+    assert last.point_data["displacement"][:, 2].min() < -1e-6  # the free end sags under gravity
+    assert len(read_pvd(tmp_path / "frame_springs.pvd")) == 6
+    assert len(read_pc2(tmp_path / "surface.pc2")[0]) == 6 and len(list(tmp_path.glob("surface_*.obj"))) == 6
+    final = load_checkpoint(tmp_path / "checkpoint.npz")
+    assert final.step == 10 and final.x.tobytes() == last.points.tobytes()  # the end state, bit for bit
+    assert "10 steps" in out and "6 frame(s)" in out and "springs" in out
+
+
+def test_progress_bar_goes_to_stderr(tmp_path, capsys, beam_file):
+    status, out, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.02", "--progress")
+    assert status == 0
+    assert "\r[" in err and "100.0%" in err and err.endswith("\n")
+    assert "\r" not in out
+
+
+def test_quiet_prints_nothing(tmp_path, capsys, beam_file):
+    assert run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--quiet") == (0, "", "")
+
+
+def test_resumed_cli_run_equals_an_uninterrupted_one(tmp_path, capsys, beam_file):
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    common = [beam_file, *PIN_END, *FAST, "--integrator", "verlet", "--E", "1e4", "--quiet"]  # h omega_max < 1
+    assert run(capsys, *common, "--duration", "0.06", "--out", whole)[0] == 0
+    assert run(capsys, *common, "--duration", "0.03", "--out", parts, "--checkpoint-every", "1", "--blender")[0] == 0
+    status, _, err = run(capsys, *common, "--duration", "0.06", "--out", parts, "--blender",
+                         "--resume", parts / "checkpoint.npz")
+    assert status == 0, err
+    a, b = read_pvd(whole / "frame.pvd"), read_pvd(parts / "frame.pvd")
+    assert [time for time, _ in a] == [time for time, _ in b] and len(a) == 7
+    assert [file.name for _, file in b] == [f"frame_{k:04d}.vtu" for k in range(7)]
+    for (_, file_a), (_, file_b) in zip(a, b):
+        # Bit-identical: the resumed run takes exactly the steps of the uninterrupted one.
+        mesh_a, mesh_b = meshio.read(file_a), meshio.read(file_b)
+        assert mesh_a.points.tobytes() == mesh_b.points.tobytes()
+        assert mesh_a.point_data["velocity"].tobytes() == mesh_b.point_data["velocity"].tobytes()
+    assert len(read_pc2(parts / "surface.pc2")[0]) == 7
+
+
+def test_divergence_is_one_line_and_leaves_complete_frames(tmp_path, capsys, beam_file):
+    # Symplectic Euler at 26x its stability limit (h omega_max ~ 52 for this stiff beam) blows up
+    # within a few steps; the guard is off so that the run is attempted.
+    status, out, err = run(capsys, beam_file, *PIN_END, "--E", "1e9", "--integrator", "symplectic_euler",
+                           "--dt", "1e-3", "--frame-dt", "1e-3", "--duration", "1", "--guard", "off",
+                           "--out", tmp_path, "--no-progress")
+    assert status == 3
+    lines = err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("volspring-sim: error: simulation diverged at step ")
+    assert "worst node" in lines[0] and "complete frame(s)" in lines[0]
+    entries = read_pvd(tmp_path / "frame.pvd")
+    assert entries and all(np.isfinite(meshio.read(file).points).all() for _, file in entries)
+    assert sorted(p.name for p in tmp_path.glob("frame_0*.vtu")) == [file.name for _, file in entries]
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_guard_raise_stops_before_the_first_step(tmp_path, capsys, beam_file):
+    status, _, err = run(capsys, beam_file, *PIN_END, "--E", "1e9", "--integrator", "symplectic_euler",
+                         "--dt", "1e-3", "--duration", "0.01", "--guard", "raise", "--out", tmp_path)
+    assert status == 1 and len(err.splitlines()) == 1 and err.startswith("volspring-sim: error: ")
+    assert not (tmp_path / "frame.pvd").exists()
+
+
+@pytest.mark.parametrize("argv, status, message", [
+    (["missing.msh"], 1, "INPUT 'missing.msh' is neither a mesh file nor a built-in shape"),
+    (["blob:1,2"], 1, "unknown shape 'blob'"),
+    (["box:1,1,0"], 1, "lz = 0.0 is not a positive finite length"),
+    (["{mesh}", "--pin", "5,5,5,6,6,6"], 1, r"--pin 5,5,5,6,6,6 selects no node; the mesh spans \[0, 0.2\] x"),
+    (["{mesh}", "--pin", "1,1,1"], 1, "--pin '1,1,1' is not 6 finite numbers"),
+    (["{mesh}", "--pin", "0,0,0,-1,1,1"], 1, "xmin > xmax"),
+    (["{mesh}", "--nu", "0.5"], 1, "nu = 0.5 is not in"),
+    (["{mesh}", "--E", "-1"], 1, "E = -1.0 Pa is not > 0"),
+    (["{mesh}", "--dt", "0"], 1, "--dt = 0 s is not a finite number > 0"),
+    (["{mesh}", "--duration", "nan"], 1, "--duration = nan s"),
+    (["{mesh}", "--gravity", "0,0"], 1, "--gravity '0,0' is not 3 finite numbers"),
+    (["{mesh}", "--checkpoint-every", "2"], 1, "--checkpoint-every needs --out"),
+    (["{mesh}", "--rule", "uniform"], 1, "--rule uniform needs --stiffness"),
+    (["{mesh}", "--size", "0.1"], 1, "--size applies to built-in shapes only"),
+    (["{mesh}", "--resume", "nowhere.npz"], 1, "no checkpoint file at nowhere.npz"),
+    (["{mesh}", "--integrator", "leapfrog"], 2, "argument --integrator: invalid choice: 'leapfrog'"),
+    (["{mesh}", "--dt", "fast"], 2, "argument --dt: invalid float value: 'fast'"),
+    ([], 2, "the following arguments are required: INPUT"),
+])
+def test_bad_input_gives_one_error_line(capsys, beam_file, argv, status, message):
+    argv = [str(beam_file) if arg == "{mesh}" else arg for arg in argv]
+    got, out, err = run(capsys, *argv, "--duration", "0.01") if "--duration" not in argv else run(capsys, *argv)
+    assert got == status
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("volspring-sim: error: ")
+    assert re.search(message, lines[0]), lines[0]
+    assert out == ""
+
+
+def test_resume_refuses_a_checkpoint_of_another_mesh(tmp_path, capsys, beam_file):
+    assert run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--out", tmp_path,
+               "--checkpoint-every", "1", "--quiet")[0] == 0
+    other = tmp_path / "other.vtu"
+    cube_mesh((2, 1, 1), size=(0.2, 0.05, 0.05)).write(other)
+    status, _, err = run(capsys, other, *PIN_END, *FAST, "--duration", "0.02", "--resume", tmp_path / "checkpoint.npz")
+    assert status == 1 and "holds 20 nodes, the model has 12" in err and len(err.splitlines()) == 1
+    status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01",
+                         "--resume", tmp_path / "checkpoint.npz")
+    assert status == 1 and "already at --duration" in err
+
+
+def test_help_exits_zero(capsys):
+    assert main(["--help"]) == 0
+    assert "--pin" in capsys.readouterr().out
+
+
+def test_shape_input_is_meshed(tmp_path, capsys):
+    status, out, err = run(capsys, "box:0.2,0.05,0.05", "--size", "0.05", "--mesher", "delaunay", "--seed", "1",
+                           "--pin", "-0.1,-1,-1,-0.1,1,1", *FAST, "--duration", "0.01", "--out", tmp_path,
+                           "--no-progress")
+    assert status == 0, err
+    assert "box:0.2,0.05,0.05 meshed by delaunay" in out
+    assert len(read_pvd(tmp_path / "frame.pvd")) == 2
