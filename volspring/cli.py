@@ -21,6 +21,8 @@ Examples
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import math
 import sys
 import time
@@ -231,13 +233,11 @@ def _check_numbers(args) -> None:
 
 def _load_mesh(args):
     """The tet mesh and a description of where it came from."""
-    from volspring.mesh import TetMesh
-
     path = Path(args.input)
     if path.is_file():
         if args.size is not None:
             raise _InputError(f"--size applies to built-in shapes only; {path} is already a tet mesh")
-        return TetMesh.read(path), str(path)
+        return _read_mesh(path), str(path)
     from meshing.shapes import SHAPE_NAMES, looks_like_shape, parse_shape  # an application may use meshing
 
     if not looks_like_shape(args.input):
@@ -255,6 +255,21 @@ def _load_mesh(args):
     except Exception as error:  # gmsh raises bare Exceptions
         raise _InputError(f"meshing {shape.spec()} at --size {size:g} with {args.mesher} failed: {error}") from error
     return mesh, f"{shape.spec()} meshed by {args.mesher} at size {size:g} m"
+
+
+def _read_mesh(path):
+    """TetMesh.read, with meshio's own printing and ``sys.exit`` on unreadable files turned into one error."""
+    from volspring.mesh import TetMesh
+
+    chatter = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
+            return TetMesh.read(path)
+    except SystemExit:  # meshio 5 exits when no reader of the extension accepts the file
+        said = " ".join(chatter.getvalue().split())
+        raise _InputError(f"cannot read {path} as a volume mesh ({said or 'meshio gave up'})") from None
+    except ValueError as error:
+        raise _InputError(f"{path}: {error}" if str(path) not in str(error) else str(error)) from error
 
 
 def _build_model(args, mesh):
