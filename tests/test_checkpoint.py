@@ -26,7 +26,8 @@ def assert_same_memory(a, b, where="memory"):
         if isinstance(x, dict):
             assert_same_memory(x, y, f"{where}/{key}")
         elif isinstance(x, (np.ndarray, np.generic)):
-            assert x.dtype == y.dtype and np.shape(x) == np.shape(y) and np.asarray(x).tobytes() == np.asarray(y).tobytes()
+            assert x.dtype == y.dtype and np.shape(x) == np.shape(y)
+            assert np.asarray(x).tobytes() == np.asarray(y).tobytes()
         elif isinstance(x, float):
             assert x.hex() == y.hex()
         else:
