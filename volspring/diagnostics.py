@@ -1,0 +1,87 @@
+"""Energies, momenta and centre of mass of a state: small functions of (scene or model, state).
+
+Each takes a :class:`Scene` or a :class:`SpringModel` (for the model-only quantities) and a
+:class:`State`. Energies are in J, momenta in kg m/s and kg m^2/s, positions in m.
+
+Examples
+--------
+>>> from volspring import Scene, SpringModel
+>>> from volspring.diagnostics import kinetic_energy, linear_momentum
+>>> pair = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 3.0], [[0, 1]], stiffness=10.0)
+>>> state = Scene(pair).initial_state(v=[[2, 0, 0], [0, 0, 0]])
+>>> kinetic_energy(pair, state), linear_momentum(pair, state).tolist()
+(2.0, [2.0, 0.0, 0.0])
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from volspring.model import SpringModel
+from volspring.scene import Gravity, Scene, State
+from volspring.springs import spring_energy as _spring_energy
+
+__all__ = ["kinetic_energy", "spring_energy", "gravitational_energy", "potential_energy", "total_energy",
+           "linear_momentum", "angular_momentum", "centre_of_mass"]
+
+
+def _model(system) -> SpringModel:
+    if isinstance(system, Scene):
+        return system.model
+    if isinstance(system, SpringModel):
+        return system
+    raise TypeError(f"expected a Scene or SpringModel, got {type(system).__name__}")
+
+
+def _scene(system) -> Scene:
+    if isinstance(system, Scene):
+        return system
+    if isinstance(system, SpringModel):
+        return Scene(system)
+    raise TypeError(f"expected a Scene or SpringModel, got {type(system).__name__}")
+
+
+def kinetic_energy(system, state: State) -> float:
+    """sum 1/2 m_i |v_i|^2 [J]."""
+    return _scene(system).kinetic_energy(state.v)
+
+
+def spring_energy(system, state: State) -> float:
+    """Elastic energy of the springs, sum 1/2 k_e (l - l0)^2 [J]."""
+    return _spring_energy(_model(system), state.x)
+
+
+def gravitational_energy(system, state: State) -> float:
+    """Potential of the scene's :class:`Gravity` forces, -sum m_i g . x_i [J] (0 for a bare model)."""
+    if isinstance(system, SpringModel):
+        return 0.0
+    return float(sum(force.potential_energy(state.x, state.t) for force in _scene(system).forces
+                     if isinstance(force, Gravity)))
+
+
+def potential_energy(system, state: State) -> float:
+    """Springs plus every conservative force of the scene (those with ``potential_energy``) [J]."""
+    return _scene(system).potential_energy(state.x, state.t)
+
+
+def total_energy(system, state: State) -> float:
+    """Kinetic plus potential energy [J]."""
+    return kinetic_energy(system, state) + potential_energy(system, state)
+
+
+def linear_momentum(system, state: State) -> np.ndarray:
+    """(3,) float -- sum m_i v_i [kg m/s]."""
+    return _model(system).masses @ state.v
+
+
+def centre_of_mass(system, state: State) -> np.ndarray:
+    """(3,) float -- sum m_i x_i / sum m_i [m]."""
+    model = _model(system)
+    return model.masses @ state.x / model.total_mass
+
+
+def angular_momentum(system, state: State, *, about=None) -> np.ndarray:
+    """(3,) float -- sum m_i (x_i - c) x v_i [kg m^2/s], about the centre of mass unless ``about`` (3,) [m]."""
+    model = _model(system)
+    centre = centre_of_mass(model, state) if about is None else np.asarray(about, dtype=np.float64)
+    return model.masses @ np.cross(state.x - centre, state.v)
