@@ -170,3 +170,19 @@ def test_unreadable_mesh_files_give_one_error_line(tmp_path, capsys):
     surface.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     status, out, err = run(capsys, surface)
     assert status == 1 and len(err.splitlines()) == 1 and "no tetra cells (found triangle)" in err
+
+
+def test_render_surface_is_anchored_in_file_order(tmp_path, capsys, beam_file):
+    # A coarse "render" surface inside the beam, in a deliberate vertex order.
+    vertices = np.array([[0.15, 0.01, 0.01], [0.05, 0.01, 0.01], [0.1, 0.04, 0.01], [0.1, 0.02, 0.04]])
+    surface = tmp_path / "render.obj"
+    surface.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in vertices) + "f 1 2 3\nf 1 3 4\nf 1 4 2\nf 2 4 3\n")
+    out_dir = tmp_path / "out"
+    status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--out", out_dir,
+                         "--blender", "--render-surface", surface, "--quiet")
+    assert status == 0, err
+    samples, _, _ = read_pc2(out_dir / "surface.pc2")
+    assert samples.shape == (2, 4, 3)
+    np.testing.assert_array_equal(samples[0], vertices.astype(np.float32))  # frame 0 is the rest shape
+    status, _, err = run(capsys, beam_file, "--render-surface", surface, "--out", out_dir)
+    assert status == 1 and "--render-surface needs --blender" in err

@@ -98,6 +98,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f"write the frames there ({SERIES_NAME}.pvd: tets, {SERIES_NAME}_springs.pvd: springs)")
     output.add_argument("--blender", action="store_true",
                         help=f"also write the boundary surface as {SURFACE_NAME}_NNNN.obj and {SURFACE_NAME}.pc2")
+    output.add_argument("--render-surface", type=Path, metavar="FILE",
+                        help="with --blender: write this surface mesh (.obj, .stl, .ply, ...) carried along by the "
+                             "tets instead of their boundary; its vertex order is kept for Blender's Mesh Cache")
     output.add_argument("--checkpoint-every", type=int, metavar="N",
                         help=f"save {CHECKPOINT_NAME} in DIR every N frames and at the end")
     output.add_argument("--resume", type=Path, metavar="CHECKPOINT",
@@ -225,6 +228,8 @@ def _check_numbers(args) -> None:
             raise _InputError("--checkpoint-every needs --out DIR to write the checkpoint in")
     if args.blender and args.out is None:
         raise _InputError("--blender needs --out DIR to write the surface cache in")
+    if args.render_surface is not None and not args.blender:
+        raise _InputError("--render-surface needs --blender (it is the surface the Blender output carries)")
     if args.rule == "uniform" and args.stiffness is None:
         raise _InputError("--rule uniform needs --stiffness (the raw spring constant [N/m])")
     if args.damping_ratio < 0 or not math.isfinite(args.damping_ratio):
@@ -351,10 +356,29 @@ def _writers(args, model, first_frame):
         return []
     writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame)]
     if args.blender:
+        surface = model if args.render_surface is None else _anchored_surface(args.render_surface, model)
         pc2 = args.out / f"{SURFACE_NAME}.pc2"
-        writers.append(BlenderWriter(args.out, model, name=SURFACE_NAME,
+        writers.append(BlenderWriter(args.out, surface, name=SURFACE_NAME,
                                      first_frame=first_frame if pc2.is_file() else 0))
     return writers
+
+
+def _anchored_surface(path, model):
+    """A render surface file bound to the model's tet mesh, vertices in the file's order."""
+    import trimesh
+
+    from meshing.anchor import anchor
+
+    if not path.is_file():
+        raise _InputError(f"no render surface file at {path}")
+    try:
+        # process=False: no merging or reordering, so the PC2 matches the file Blender imports.
+        surface = trimesh.load(path, force="mesh", process=False)
+    except Exception as error:  # trimesh raises a variety of errors for unreadable files
+        raise _InputError(f"cannot read {path} as a surface mesh: {error}") from error
+    if len(getattr(surface, "vertices", ())) == 0:
+        raise _InputError(f"{path} holds no surface vertices")
+    return anchor(model.topology.mesh, surface)
 
 
 # ---------------------------------------------------------------------- terminal
