@@ -718,7 +718,7 @@ def error_norms(mesh, solution: StaticSolution, displacement: Callable, gradient
         exact = displacement(x).T.reshape(w.x.shape)
         exact_gradient = np.moveaxis(gradient(x), 0, -1).reshape((3, 3) + w.x.shape[1:])
         field = w["u"]
-        return np.stack([((field.value - exact) ** 2).sum(axis=0),
+        return np.stack([((field - exact) ** 2).sum(axis=0),
                          ((field.grad - exact_gradient) ** 2).sum(axis=(0, 1))])
 
     l2, h1 = np.sqrt(asm(squared_errors, basis, u=basis.interpolate(solution.dofs)))
