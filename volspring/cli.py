@@ -441,3 +441,7 @@ def _summary(args, origin, mesh, model, scene, integrator, result, first_frame, 
                      + (f", {SURFACE_NAME}_NNNN.obj, {SURFACE_NAME}.pc2" if args.blender else "")
                      + (f", {CHECKPOINT_NAME}" if args.checkpoint_every else "") + ")")
     print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
