@@ -92,3 +92,11 @@ def test_real_bunny_tet_mesh(shared_data):
     mesh = TetMesh.read(shared_data / "coarse_bunny.mesh")
     assert (mesh.node_count, mesh.tet_count) == (699, 2274)  # the data README's figures
     assert (mesh.tet_volumes > 0).all()
+
+
+@pytest.mark.parametrize("name, content", [("broken.vtu", b"garbage\n"), ("empty.msh", b""), ("empty.vtu", b"")])
+def test_unreadable_file_is_a_value_error_not_an_exit(tmp_path, name, content):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with pytest.raises(ValueError, match=f"cannot read .*{name}"):
+        TetMesh.read(path)

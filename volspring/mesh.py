@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import logging
 import os
 from dataclasses import dataclass
@@ -249,10 +251,15 @@ class TetMesh:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"no mesh file at {path}")
+        file_format = _meshio_format(path)
+        # meshio prints and calls sys.exit(1) when every reader for an extension fails, and
+        # lets a reader's own exceptions through on truncated files: turn both into one error.
         try:
-            mesh = meshio.read(path)
-        except meshio.ReadError as error:
-            raise ValueError(f"cannot read {path} as a mesh: {error}") from error
+            with contextlib.redirect_stdout(io.StringIO()) as chatter:
+                mesh = meshio.read(path, file_format=file_format)
+        except (SystemExit, Exception) as error:
+            detail = chatter.getvalue().strip() or f"{type(error).__name__}: {error}"
+            raise ValueError(f"cannot read {path} as a {file_format} mesh ({detail})") from None
         return cls.from_meshio(mesh)
 
     def write(self, path, *, point_data=None, cell_data=None, file_format=None) -> Path:
