@@ -165,7 +165,7 @@ def test_unreadable_mesh_files_give_one_error_line(tmp_path, capsys):
     # meshio prints and calls sys.exit on such a file; the CLI must still say one line and return.
     status, out, err = run(capsys, tmp_path / "garbage.vtu")
     assert status == 1 and out == "" and len(err.splitlines()) == 1
-    assert err.startswith(f"volspring-sim: error: cannot read {tmp_path / 'garbage.vtu'} as a volume mesh")
+    assert err.startswith(f"volspring-sim: error: cannot read {tmp_path / 'garbage.vtu'}")
     surface = tmp_path / "triangle.obj"
     surface.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     status, out, err = run(capsys, surface)

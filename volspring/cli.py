@@ -21,8 +21,6 @@ Examples
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
 import math
 import sys
 import time
@@ -263,18 +261,12 @@ def _load_mesh(args):
 
 
 def _read_mesh(path):
-    """TetMesh.read, with meshio's own printing and ``sys.exit`` on unreadable files turned into one error."""
     from volspring.mesh import TetMesh
 
-    chatter = io.StringIO()
     try:
-        with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
-            return TetMesh.read(path)
-    except SystemExit:  # meshio 5 exits when no reader of the extension accepts the file
-        said = " ".join(chatter.getvalue().split())
-        raise _InputError(f"cannot read {path} as a volume mesh ({said or 'meshio gave up'})") from None
-    except ValueError as error:
-        raise _InputError(f"{path}: {error}" if str(path) not in str(error) else str(error)) from error
+        return TetMesh.read(path)
+    except (ValueError, FileNotFoundError) as error:
+        raise _InputError(str(error)) from error
 
 
 def _build_model(args, mesh):

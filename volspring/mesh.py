@@ -255,10 +255,11 @@ class TetMesh:
         # meshio prints and calls sys.exit(1) when every reader for an extension fails, and
         # lets a reader's own exceptions through on truncated files: turn both into one error.
         try:
-            with contextlib.redirect_stdout(io.StringIO()) as chatter:
+            chatter = io.StringIO()
+            with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
                 mesh = meshio.read(path, file_format=file_format)
         except (SystemExit, Exception) as error:
-            detail = chatter.getvalue().strip() or f"{type(error).__name__}: {error}"
+            detail = " ".join(chatter.getvalue().split()) or f"{type(error).__name__}: {error}"
             raise ValueError(f"cannot read {path} as a {file_format} mesh ({detail})") from None
         return cls.from_meshio(mesh)
 
