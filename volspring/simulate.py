@@ -1,0 +1,259 @@
+"""Run a scene for a duration: frames, a callback, recorded energies and momenta, divergence checks.
+
+:func:`simulate` takes ``ceil(duration / dt)`` steps of exactly ``dt`` (a fixed step keeps
+position Verlet valid and a resumed run bit-identical to an uninterrupted one), so the last state
+may lie up to one step past ``duration``; choose ``duration`` a multiple of ``dt`` to end on it.
+
+Frames. Frame times are the multiples of ``frame_dt`` (absolute times, so a resumed run keeps the
+same frames); a frame is taken at the first step whose time reaches the next frame time (within
+1e-6 dt of round-off), so with ``frame_dt`` a multiple of ``dt`` frames fall exactly on it. The
+start state is frame 0; without ``frame_dt`` every step is a frame. At each frame the result
+records time, step, kinetic / potential / total energy, linear momentum and angular momentum
+(about the centre of mass), then ``callback(frame_index, state)`` is called (``frame_index``
+counts this run's frames from 0). A callback that returns ``False`` (exactly ``False``, not just
+a falsy value) stops the run after that frame; ``result.stopped_early`` says so.
+
+Divergence. :meth:`Integrator.step` raises :class:`SimulationDiverged` on NaN or Inf, so no
+non-finite state ever reaches the callback. Runaway energy also raises it, checked after every
+step on the total energy E = kinetic + potential (springs and forces with a potential):
+
+- with ``energy_limit`` [J]: when E > energy_limit (``math.inf`` turns the check off);
+- by default: when E - E_0 - W > ``runaway_factor`` * S, where W is the work done so far by
+  the scene's forces without a potential (drag, wind, user fields; trapezoidal rule per step)
+  and S is the energy scale of the start, S = kinetic_0 + spring_0 + L * sum_i |F_ext,i|
+  (L the diagonal of the rest bounding box, F_ext the scene's forces at the start: for gravity
+  S includes M g L, the work of falling one body size). A conservative run keeps E - E_0 - W near
+  0 (integrator error only), while an unstable one grows it geometrically. Dampers only remove
+  energy and are not counted. The work of moving pins is not tracked, so with moving pins (or
+  when S = 0: nothing can move) the default check is off; NaN detection remains.
+The error names the step, time, dt and the node with the largest kinetic energy. Two limits of
+the default check: energies are measured with the state's velocity, which for symplectic Euler
+and the Verlet family is the half-step one, so a stable run close to the stability limit shows a
+kinetic energy up to 1 / (1 - (h omega / 2)^2) times the true one in its fastest modes (10x at
+h omega = 1.9), and a body accelerated by a force F shows an O(h F v) offset; pass a larger
+``runaway_factor`` or an ``energy_limit`` for runs that live there.
+
+Nothing is printed: progress goes through ``callback``, events to ``logging``.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from volspring.diagnostics import angular_momentum, linear_momentum
+from volspring.errors import SimulationDiverged
+from volspring.integrators import Integrator, make_integrator
+from volspring.scene import Scene, State
+from volspring.springs import spring_energy
+from volspring.stability import GUARD_ACTIONS, StabilityGuard
+
+__all__ = ["simulate", "SimulationResult", "RUNAWAY_FACTOR"]
+
+logger = logging.getLogger(__name__)
+
+RUNAWAY_FACTOR = 10.0  # default: energy may exceed its start plus work by 10x the start's energy scale
+_FRAME_SLACK = 1e-6    # a step within this fraction of dt of a frame time is on it (round-off of t += dt)
+
+
+@dataclass(frozen=True, eq=False)
+class SimulationResult:
+    """What :func:`simulate` returns: the final state and per-frame records.
+
+    Parameters
+    ----------
+    state : State -- the last state reached
+    time : (f,) float -- frame times [s]
+    step : (f,) int -- step count of each frame's state
+    kinetic_energy, potential_energy, total_energy : (f,) float -- [J]
+    linear_momentum : (f, 3) float -- [kg m/s]
+    angular_momentum : (f, 3) float -- about the centre of mass [kg m^2/s]
+    steps_taken : int -- steps taken by this run
+    stopped_early : bool -- the callback returned False
+    """
+
+    state: State
+    time: np.ndarray
+    step: np.ndarray
+    kinetic_energy: np.ndarray
+    potential_energy: np.ndarray
+    total_energy: np.ndarray
+    linear_momentum: np.ndarray
+    angular_momentum: np.ndarray
+    steps_taken: int
+    stopped_early: bool
+
+    @property
+    def frame_count(self) -> int:
+        return len(self.time)
+
+
+class _EnergyMonitor:
+    """Total energy after each step, and the runaway check (see the module docstring)."""
+
+    def __init__(self, scene: Scene, state: State, *, energy_limit, runaway_factor):
+        self.scene = scene
+        self.nonconservative = [f for f in scene.forces if not hasattr(f, "potential_energy")]
+        self.kinetic, self.potential = self.energies(state)
+        self.start = self.kinetic + self.potential
+        self.work = 0.0
+        self.limit = energy_limit
+        self.active = True
+        if energy_limit is None:
+            model = scene.model
+            external = np.zeros_like(state.x)
+            for force in scene.forces:
+                force.accumulate(state.x, state.v, state.t, external)
+            size = float(np.linalg.norm(np.ptp(model.rest_positions, axis=0)))
+            self.scale = (self.kinetic + spring_energy(model, state.x)
+                          + size * float(np.linalg.norm(external, axis=1).sum()))
+            moving_pins = scene.pins is not None and scene.pins.motion is not None
+            self.active = self.scale > 0 and not moving_pins and math.isfinite(runaway_factor)
+            self.allowance = runaway_factor * self.scale
+            if not self.active:
+                logger.debug("default energy runaway check off (scale %g J, moving pins %s)", self.scale, moving_pins)
+        self.forces_before = self._nonconservative_forces(state) if self.active else None
+
+    def energies(self, state: State):
+        return self.scene.kinetic_energy(state.v), self.scene.potential_energy(state.x, state.t)
+
+    def _nonconservative_forces(self, state):
+        if not self.nonconservative:
+            return None
+        total = np.zeros_like(state.x)
+        for force in self.nonconservative:
+            force.accumulate(state.x, state.v, state.t, total)
+        total[~self.scene.free] = 0.0
+        return total
+
+    def after_step(self, before: State, after: State, dt: float) -> None:
+        self.kinetic, self.potential = self.energies(after)
+        total = self.kinetic + self.potential
+        if self.limit is not None:
+            if total > self.limit:
+                self._diverged(after, dt, f"total energy {total:.6g} J is above energy_limit = {self.limit:.6g} J")
+            return
+        if not self.active:
+            return
+        if self.forces_before is not None:
+            forces_after = self._nonconservative_forces(after)
+            self.work += 0.5 * float(np.sum((self.forces_before + forces_after) * (after.x - before.x)))
+            self.forces_before = forces_after
+        excess = total - self.start - self.work
+        if not excess <= self.allowance:
+            self._diverged(after, dt, f"runaway energy: total {total:.6g} J exceeds start {self.start:.6g} J "
+                                      f"+ work {self.work:.6g} J by {excess:.6g} J, more than "
+                                      f"{self.allowance:.6g} J (runaway_factor x energy scale)")
+
+    def _diverged(self, state, dt, reason):
+        node_energy = self.scene.model.masses * np.einsum("ij,ij->i", state.v, state.v)
+        raise SimulationDiverged(reason, step=state.step, time=state.t, dt=dt, node=int(np.argmax(node_energy)))
+
+
+def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=None, callback=None,
+             guard="warn", energy_limit=None, runaway_factor=RUNAWAY_FACTOR) -> SimulationResult:
+    """Run ``scene`` for ``duration`` seconds with fixed steps ``dt``.
+
+    Parameters
+    ----------
+    scene : Scene
+    integrator : Integrator or str -- an integrator or a registered name (``make_integrator``)
+    duration : float -- simulated time to run [s], >= 0
+    dt : float -- time step [s], > 0
+    state : State, optional -- where to start (e.g. a checkpoint); default ``scene.initial_state()``
+    frame_dt : float, optional -- time between frames [s]; default every step is a frame
+    callback : callable, optional -- ``callback(frame_index, state)`` at every frame; return
+        ``False`` to stop the run
+    guard : {"warn", "raise", "off"} -- check ``dt`` against an explicit integrator's stability
+        limit before the first step (:class:`~volspring.stability.StabilityGuard`)
+    energy_limit : float, optional -- total energy [J] above which the run has diverged; default
+        the relative runaway check of the module docstring
+    runaway_factor : float -- allowance of the default runaway check, in units of the start's
+        energy scale
+
+    Returns
+    -------
+    SimulationResult
+
+    Raises
+    ------
+    SimulationDiverged -- NaN/Inf or runaway energy, naming step, time, dt and the worst node
+    StepTooLargeWarning -- with ``guard="raise"``, before any step
+
+    Examples
+    --------
+    >>> from volspring import Scene, SpringModel
+    >>> from volspring.simulate import simulate
+    >>> scene = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0))
+    >>> result = simulate(scene, "verlet", duration=0.1, dt=0.01, frame_dt=0.05,
+    ...                   state=scene.initial_state(v=[[0, 0, 0], [1, 0, 0]]))
+    >>> result.time.round(12).tolist(), result.steps_taken
+    ([0.0, 0.05, 0.1], 10)
+    """
+    if isinstance(integrator, str):
+        integrator = make_integrator(integrator)
+    if not isinstance(integrator, Integrator):
+        raise TypeError(f"integrator must be an Integrator or a registered name, got {type(integrator).__name__}")
+    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+        raise ValueError(f"dt = {dt!r} s is not a finite number > 0")
+    if not (isinstance(duration, (int, float, np.floating)) and math.isfinite(duration) and duration >= 0):
+        raise ValueError(f"duration = {duration!r} s is not a finite number >= 0")
+    if frame_dt is not None and not (math.isfinite(frame_dt) and frame_dt > 0):
+        raise ValueError(f"frame_dt = {frame_dt!r} s is not a finite number > 0")
+    if guard not in GUARD_ACTIONS:
+        raise ValueError(f"guard = {guard!r}; expected one of {', '.join(map(repr, GUARD_ACTIONS))}")
+    if energy_limit is not None and math.isnan(energy_limit):
+        raise ValueError("energy_limit = nan J; expected a number or None")
+    state = scene.initial_state() if state is None else state
+    if not isinstance(state, State):
+        raise TypeError(f"state must be a volspring State, got {type(state).__name__}")
+
+    step_count = max(int(math.ceil(duration / dt - 1e-9)), 0)
+    if guard != "off":
+        StabilityGuard(scene, integrator, action=guard).check(dt, steps=max(step_count, 1))
+    logger.info("simulating %d steps of %s, dt = %.6g s, from t = %.6g s", step_count, integrator.name, dt, state.t)
+
+    monitor = _EnergyMonitor(scene, state, energy_limit=energy_limit, runaway_factor=runaway_factor)
+    records = {key: [] for key in ("time", "step", "kinetic", "potential", "linear", "angular")}
+    frame_index = 0
+    slack = _FRAME_SLACK * dt
+
+    def frame(current: State) -> bool:
+        nonlocal frame_index
+        records["time"].append(current.t)
+        records["step"].append(current.step)
+        records["kinetic"].append(monitor.kinetic)
+        records["potential"].append(monitor.potential)
+        records["linear"].append(linear_momentum(scene, current))
+        records["angular"].append(angular_momentum(scene, current))
+        keep_going = True if callback is None else callback(frame_index, current) is not False
+        frame_index += 1
+        return keep_going
+
+    def next_frame_time(t):
+        return None if frame_dt is None else (math.floor((t + slack) / frame_dt) + 1) * frame_dt
+
+    stopped = not frame(state)
+    upcoming = next_frame_time(state.t)
+    taken = 0
+    while not stopped and taken < step_count:
+        new = integrator.step(scene, state, dt)
+        taken += 1
+        monitor.after_step(state, new, dt)
+        state = new
+        if upcoming is None or state.t >= upcoming - slack:
+            stopped = not frame(state)
+            upcoming = next_frame_time(state.t)
+    if stopped:
+        logger.info("stopped by the callback at step %d (t = %.6g s)", state.step, state.t)
+    logger.info("simulated %d steps to t = %.6g s, %d frames", taken, state.t, frame_index)
+    return SimulationResult(
+        state=state, time=np.array(records["time"]), step=np.array(records["step"], dtype=np.int64),
+        kinetic_energy=np.array(records["kinetic"]), potential_energy=np.array(records["potential"]),
+        total_energy=np.array(records["kinetic"]) + np.array(records["potential"]),
+        linear_momentum=np.array(records["linear"]).reshape(-1, 3),
+        angular_momentum=np.array(records["angular"]).reshape(-1, 3),
+        steps_taken=taken, stopped_early=stopped)
