@@ -1,17 +1,19 @@
 """Benchmark barycentric anchoring: a render surface 4x finer than a ~50k-tet mesh.
 
-The tet mesh is scipy's Delaunay of a jittered lattice filling the unit box (boundary points kept on it). Two render surfaces:
+The tet mesh is scipy's Delaunay of a jittered lattice filling the unit box (points on the box's faces kept on
+them, so its boundary is the box). Three render surfaces:
 
-- ``sphere``: an icosphere inside the box with about 4x the tet mesh's *node count* in vertices (every vertex
-  inside some tet: the grid search path only);
-- ``box``: the unit box's surface subdivided to at least 4x the tet mesh's *boundary vertex count*, every vertex
-  on the tet mesh's boundary (the hardest case for the search: no vertex is deep inside a tet);
-- ``box, grown 1%``: the same surface scaled by 1.01 about the centre, so every vertex is a hair outside and
-  goes through the nearest-boundary-face path too.
+- ``sphere``: an icosphere of radius 0.4 inside the box with at least 4x the tet mesh's *node count* in vertices
+  (every vertex inside some tet);
+- ``box``: the unit box's surface as a grid with at least 4x the tet mesh's *boundary vertex count*, every vertex
+  on the tet mesh's boundary (no vertex is deep inside a tet: many go through the exhaustive grid search);
+- ``box grown 1%``: the same surface scaled by 1.01 about the centre, so every vertex is a hair outside and goes
+  through the grid search and then the nearest-boundary-face search.
 
-Prints wall and CPU times (best of a few runs), counts and the affine-exactness error. Run::
+Prints wall and CPU times (best of a few runs), counts and the rest and affine-exactness errors. Run from the
+repository root (or after ``pip install .``, without PYTHONPATH)::
 
-    OMP_NUM_THREADS=1 python benchmarks/bench_anchor.py [--cells 21] [--repeat 3]
+    OMP_NUM_THREADS=1 PYTHONPATH=. python benchmarks/bench_anchor.py [--cells 20] [--repeat 3]
 """
 
 from __future__ import annotations

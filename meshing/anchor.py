@@ -133,16 +133,16 @@ def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = 1e-9, max_distance:
     Returns
     -------
     Anchor
-        Vertices inside several tets (on shared faces) take the one where they are deepest. Vertices outside every
-        tet take the tet of the nearest boundary face (the nearest tet) with extrapolated weights that still sum
-        to 1 and reproduce the vertex at rest; they are counted (``outside``, ``outside_count``,
+        Vertices inside several tets (on shared faces) take one of them, the deepest of those tested. Vertices
+        outside every tet take the tet of the nearest boundary face (the nearest tet) with extrapolated weights
+        that still sum to 1 and reproduce the vertex at rest; they are counted (``outside``, ``outside_count``,
         ``max_outside_distance``) and logged.
 
     Raises
     ------
     ValueError
-        For vertices of the wrong shape or non-finite, a negative tolerance, or vertices farther outside than
-        ``max_distance``.
+        For no vertices, vertices of the wrong shape or non-finite, a negative tolerance or ``max_distance``, or
+        vertices farther outside than ``max_distance``.
 
     Examples
     --------
@@ -155,8 +155,10 @@ def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = 1e-9, max_distance:
     ([False, True], True)
     """
     points, faces = _surface_arrays(surface)
-    if not np.isfinite(tolerance) or tolerance < 0:
-        raise ValueError(f"tolerance = {tolerance} is not >= 0 and finite; expected a barycentric tolerance")
+    if not (isinstance(tolerance, (int, float, np.floating)) and np.isfinite(tolerance) and tolerance >= 0):
+        raise ValueError(f"tolerance = {tolerance!r} is not >= 0 and finite; expected a barycentric tolerance")
+    if max_distance is not None and not (isinstance(max_distance, (int, float, np.floating)) and max_distance >= 0):
+        raise ValueError(f"max_distance = {max_distance!r} is not >= 0; expected a distance [m] or None")
     inverse, origin = _barycentric_frames(tet_mesh)
     tet_index = _locate(tet_mesh, points, inverse, origin, tolerance)
     outside = tet_index < 0
@@ -199,12 +201,19 @@ def _surface_arrays(surface):
         if getattr(surface, "faces", None) is not None:
             faces = np.asarray(surface.faces, dtype=np.int64).reshape(-1, 3)
     else:
-        points = np.asarray(surface, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
-        raise ValueError(f"surface vertices must have shape (p, 3), got {points.shape}")
+        try:
+            points = np.asarray(surface, dtype=np.float64)
+        except (TypeError, ValueError) as error:
+            raise ValueError(
+                f"surface must be a trimesh.Trimesh or a (p, 3) array of vertices, got {type(surface).__name__}"
+            ) from error
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) == 0:
+        raise ValueError(f"surface vertices must have shape (p, 3) with p > 0, got {points.shape}")
     bad = ~np.isfinite(points).all(axis=1)
     if bad.any():
-        raise ValueError(f"{bad.sum()} surface vertices have non-finite coordinates, first is vertex {np.flatnonzero(bad)[0]}")
+        raise ValueError(
+            f"{bad.sum()} surface vertices have non-finite coordinates, first is vertex {np.flatnonzero(bad)[0]}"
+        )
     return points, faces
 
 
@@ -303,7 +312,8 @@ def _locate_in_grid(corners, points, inverse, origin, tolerance) -> np.ndarray:
     for begin, end in zip(np.concatenate([[0], bounds[:-1]]), bounds):
         batch_count = count[begin:end]
         point_of = np.repeat(np.arange(end - begin), batch_count)
-        slot = np.repeat(start[begin:end] - np.cumsum(batch_count) + batch_count, batch_count) + np.arange(len(point_of))
+        run_start = np.repeat(start[begin:end] - np.cumsum(batch_count) + batch_count, batch_count)
+        slot = run_start + np.arange(len(point_of))
         found[begin:end] = _deepest_inside(point_of, tet_of[slot], end - begin, points[begin:end],
                                            inverse, origin, tolerance)
     return found

@@ -1,6 +1,7 @@
 """Barycentric anchoring of a render surface: exact at rest, affine-exact, every vertex bound, outside ones reported."""
 
 import dataclasses
+import doctest
 import logging
 
 import numpy as np
@@ -47,7 +48,8 @@ def distance_to_tets(mesh: TetMesh, points, tets) -> np.ndarray:
     """(q,) distance from points[i] (q, 3) to tet tets[i] (q,), outside it, by trimesh's closest point on its faces."""
     faces = mesh.points[mesh.tets[tets][:, [[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]]]].reshape(-1, 3, 3)
     repeated = np.repeat(points, 4, axis=0)
-    return np.linalg.norm(trimesh.triangles.closest_point(faces, repeated) - repeated, axis=1).reshape(-1, 4).min(axis=1)
+    distance = np.linalg.norm(trimesh.triangles.closest_point(faces, repeated) - repeated, axis=1)
+    return distance.reshape(-1, 4).min(axis=1)
 
 
 def random_affine(seed: int):
@@ -213,9 +215,12 @@ def test_anchor_is_immutable():
 @pytest.mark.parametrize(
     ("surface", "options", "message"),
     [
-        (np.zeros((4, 2)), {}, r"surface vertices must have shape \(p, 3\), got \(4, 2\)"),
+        (np.zeros((4, 2)), {}, r"surface vertices must have shape \(p, 3\) with p > 0, got \(4, 2\)"),
+        (np.zeros((0, 3)), {}, r"surface vertices must have shape \(p, 3\) with p > 0, got \(0, 3\)"),
+        (np.array([[0.5, 0.5, 0.5]]), {"max_distance": -1.0}, "max_distance = -1.0 is not >= 0"),
         (np.array([[0.5, 0.5, np.nan]]), {}, "1 surface vertices have non-finite coordinates, first is vertex 0"),
         (np.array([[0.5, 0.5, 0.5]]), {"tolerance": -1.0}, "tolerance = -1.0 is not >= 0"),
+        (trimesh.Scene(), {}, "surface must be a trimesh.Trimesh or a \\(p, 3\\) array of vertices, got Scene"),
     ],
 )
 def test_bad_input_is_refused(surface, options, message):
@@ -228,3 +233,7 @@ def test_deform_checks_the_node_array_shape():
     bound = anchor(mesh, np.array([[0.2, 0.3, 0.4]]))
     with pytest.raises(ValueError, match=rf"x must have shape \(\.\.\., {mesh.node_count}, 3\).*got \(5, 3\)"):
         bound.deform(np.zeros((5, 3)))
+
+
+def test_docstring_examples_run():
+    assert doctest.testmod(anchor_module).failed == 0
