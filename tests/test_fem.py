@@ -324,3 +324,41 @@ def test_bad_options(unit_cube, options, error, message):
     arguments = {"clamp": Box.plane("x", 0.0), "gravity": (0, 0, -G)} | options
     with pytest.raises(error, match=message):
         solve_static(unit_cube, BEAM, **arguments)
+
+
+# ---------------------------------------------------------------------------- cache
+def test_cache_returns_the_stored_reference(tmp_path, unit_cube):
+    from validation.cache import cache_key, cached_solve_modes, cached_solve_static
+
+    arguments = {"clamp": Box.plane("z", 0.0), "gravity": (0, 0, -G), "element": "P1"}
+    first = cached_solve_static(unit_cube, BEAM, folder=tmp_path, **arguments)
+    files = list(tmp_path.glob("static-*.npz"))
+    assert len(files) == 1
+    again = cached_solve_static(unit_cube, BEAM, folder=tmp_path, **arguments)
+    np.testing.assert_array_equal(again.displacement, first.displacement)
+    assert again.info == first.info and again.volume_change == first.volume_change  # read back, not re-solved
+    # The same clamp written as a callable selects the same nodes, hence the same key.
+    same = dict(arguments, clamp=lambda points: np.isclose(points[:, 2], 0.0))
+    assert cache_key("static", unit_cube, BEAM, **same) == cache_key("static", unit_cube, BEAM, **arguments)
+    # Anything that changes the answer changes the key.
+    for changed in ({"element": "P2"}, {"gravity": (0, 0, -1.0)}, {"clamp": Box.plane("z", 1.0)}):
+        assert cache_key("static", unit_cube, BEAM, **(arguments | changed)) != cache_key("static", unit_cube, BEAM,
+                                                                                          **arguments)
+    assert cache_key("static", unit_cube, (E, 0.31, RHO), **arguments) != cache_key("static", unit_cube, BEAM,
+                                                                                     **arguments)
+    modes = cached_solve_modes(unit_cube, BEAM, folder=tmp_path, clamp=Box.plane("z", 0.0), count=2)
+    np.testing.assert_array_equal(cached_solve_modes(unit_cube, BEAM, folder=tmp_path, clamp=Box.plane("z", 0.0),
+                                                     count=2).frequencies, modes.frequencies)
+
+
+def test_cache_recovers_from_a_damaged_file(tmp_path, unit_cube):
+    from validation.cache import cached_solve_static
+
+    arguments = {"clamp": Box.plane("z", 0.0), "gravity": (0, 0, -G), "element": "P1"}
+    first = cached_solve_static(unit_cube, BEAM, folder=tmp_path, **arguments)
+    (path,) = tmp_path.glob("static-*.npz")
+    path.write_bytes(b"not an npz")
+    np.testing.assert_array_equal(cached_solve_static(unit_cube, BEAM, folder=tmp_path, **arguments).displacement,
+                                  first.displacement)
+    with pytest.raises(TypeError, match="body_force"):
+        cached_solve_static(unit_cube, BEAM, folder=tmp_path, body_force=lambda p: 0 * p, **arguments)
