@@ -46,7 +46,7 @@ def add_shells(mesh: TetMesh, *, layers: int, thickness: float) -> SpringTopolog
     -------
     SpringTopology
         Points: the mesh nodes, then layer 1's nodes, layer 2's nodes, ... (each layer in the order of
-        ``np.unique(mesh.boundary_faces)``). Springs: the tet edges (``tet_edge``), then per layer its ``shell``,
+        ``mesh.boundary_nodes``). Springs: the tet edges (``tet_edge``), then per layer its ``shell``,
         ``shell_diagonal`` and ``shell_edge`` springs. ``shell_triangles``: each layer's triangles in global node
         indices, wound outward like the mesh's boundary faces; ``shell_layer`` and ``shell_thickness`` filled.
         For a closed surface with ``V`` vertices and ``E`` edges each layer adds ``V`` nodes, ``V`` shell,
@@ -181,7 +181,8 @@ def _check_offset(layer, thickness, layers, cross, below_cross, surface_cross, f
         first = np.flatnonzero(flipped)[0]
         raise ValueError(
             f"thickness = {thickness} with layers = {layers} flips {flipped.sum()} of {len(faces)} shell triangles "
-            f"in layer {layer} (first is the offset of boundary face {first}, nodes {node_ids[faces[first]].tolist()}): "
+            f"in layer {layer} (first is the offset of boundary face {first}, "
+            f"nodes {node_ids[faces[first]].tolist()}): "
             "the shell would self-intersect; expected layers * thickness well below the local feature size"
         )
     shrunk = np.linalg.norm(cross, axis=1) < SHRINK_WARNING_RATIO * np.linalg.norm(surface_cross, axis=1)
