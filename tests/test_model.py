@@ -127,3 +127,33 @@ def test_collapsed_spring_is_an_error_not_nan():
     model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0)
     with pytest.raises(FloatingPointError, match="spring 0 between nodes 0 and 1"):
         spring_forces(model, np.zeros((2, 3)))
+
+
+def _enclosed_volume(points, triangles):
+    x = points[triangles]
+    return np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2])) / 6
+
+
+@pytest.mark.parametrize("rule", ["van_gelder", "lloyd"])
+def test_shells_add_their_own_mass_and_stiffen_every_shell_spring(rule):
+    from meshing.shells import add_shells
+
+    mesh = cube_mesh((3, 3, 3))
+    thickness = 0.02
+    topology = add_shells(mesh, layers=2, thickness=thickness)
+    model = SpringModel.from_mesh(topology, STEEL_LIKE, rule=rule)
+    body = model.masses[: mesh.node_count]
+    # The body's own nodes keep exactly the mass of their tets (the documented rule).
+    assert np.allclose(body, STEEL_LIKE.density * mesh.node_volumes(), rtol=1e-14)
+    # The shell weighs density x the volume between the mesh boundary and the outer layer.
+    # Prisms split into 3 tets do not tile that volume exactly where the side quads of two
+    # neighbouring prisms are non-planar (cube corners and edges); at t / L = 0.02 the
+    # mismatch measured 0.04% (0.15% at t / L = 0.1), so 1% bounds it with margin.
+    outer = topology.shell_triangles[topology.shell_layer[topology.shell_triangles[:, 0]] == 2]
+    shell_volume = _enclosed_volume(topology.points, outer) - mesh.volume
+    assert model.masses[mesh.node_count:].sum() == pytest.approx(STEEL_LIKE.density * shell_volume, rel=1e-2)
+    shell_springs = topology.kinds > 0
+    assert (model.stiffness[shell_springs] > 0).all()
+    # Tet edges get the same stiffness as without shells: prisms touch only shell springs.
+    alone = SpringModel.from_mesh(mesh, STEEL_LIKE, rule=rule)
+    assert np.allclose(np.sort(model.stiffness[~shell_springs]), np.sort(alone.stiffness), rtol=1e-14)
