@@ -1,16 +1,16 @@
 """Time integrators behind one interface, ``integrator.step(scene, state, dt) -> State``, and a registry.
 
-=========================  =========================  =====  ====================================
-name                       class                      order  stable when (undamped, h omega_max)
-=========================  =========================  =====  ====================================
-``explicit_euler``         :class:`ExplicitEuler`     1      never
-``symplectic_euler``       :class:`SymplecticEuler`   1      < 2
-``midpoint``               :class:`Midpoint`          2      never (slow growth)
-``rk4``                    :class:`RK4`               4      <= 2 sqrt(2)
-``verlet``                 :class:`PositionVerlet`    2      < 2
-``time_corrected_verlet``  :class:`TimeCorrectedVerlet` 2    < 2 (variable step)
-``implicit_euler``         ``ImplicitEuler``          1      always
-=========================  =========================  =====  ====================================
+=========================  ============================  =====  ===================================
+name                       class                         order  stable when (undamped, h omega_max)
+=========================  ============================  =====  ===================================
+``explicit_euler``         :class:`ExplicitEuler`        1      never
+``symplectic_euler``       :class:`SymplecticEuler`      1      < 2
+``midpoint``               :class:`Midpoint`             2      never (slow growth)
+``rk4``                    :class:`RK4`                  4      <= 2 sqrt(2)
+``verlet``                 :class:`PositionVerlet`       2      < 2
+``time_corrected_verlet``  :class:`TimeCorrectedVerlet`  2      < 2 (variable step)
+``implicit_euler``         :class:`ImplicitEuler`        1      always
+=========================  ============================  =====  ===================================
 
 Examples
 --------
@@ -26,13 +26,12 @@ import importlib
 from volspring.integrators.base import Integrator
 from volspring.integrators.explicit import RK4, ExplicitEuler, Midpoint, SymplecticEuler
 from volspring.integrators.verlet import PositionVerlet, TimeCorrectedVerlet
-
-# --- implicit: added when volspring/integrators/implicit.py imports cleanly (see make_integrator) ---
+from volspring.integrators.implicit import ImplicitEuler  # written alongside, by the implicit-solver work
 
 __all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Midpoint", "RK4", "PositionVerlet",
-           "TimeCorrectedVerlet", "INTEGRATORS", "integrator_class", "make_integrator"]
+           "TimeCorrectedVerlet", "ImplicitEuler", "INTEGRATORS", "integrator_class", "make_integrator"]
 
-#: Registered integrators by name: a class, or "module:Class" imported on first use.
+#: Registered integrators by name: a class, or "module:Class" imported on first use (for plug-ins).
 INTEGRATORS = {
     "explicit_euler": ExplicitEuler,
     "symplectic_euler": SymplecticEuler,
@@ -40,7 +39,7 @@ INTEGRATORS = {
     "rk4": RK4,
     "verlet": PositionVerlet,
     "time_corrected_verlet": TimeCorrectedVerlet,
-    "implicit_euler": "volspring.integrators.implicit:ImplicitEuler",
+    "implicit_euler": ImplicitEuler,
 }
 
 _ALIASES = {"rk2": "midpoint", "position_verlet": "verlet", "backward_euler": "implicit_euler"}
@@ -72,7 +71,8 @@ def make_integrator(name: str, **options) -> Integrator:
     Parameters
     ----------
     name : str -- one of ``INTEGRATORS`` (aliases: rk2, position_verlet, backward_euler)
-    **options -- passed to the class (the explicit and Verlet schemes take none)
+    **options -- passed to the class (the explicit and Verlet schemes take none; see
+        :class:`ImplicitEuler` for the solver options)
 
     Raises
     ------
