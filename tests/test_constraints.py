@@ -91,7 +91,7 @@ def test_coulomb_friction_on_a_tilted_plane_for_one_particle(ratio):
     mu = 0.5
     theta = np.arctan(ratio * mu)
     normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
-    downhill = np.array([np.cos(theta), 0.0, np.sin(theta)]) * -1.0  # normal points up-slope-left
+    downhill = -np.array([np.cos(theta), 0.0, np.sin(theta)])  # the tangent along which g . t < 0
     particle = SpringModel.from_arrays([[0.0, 0.0, 0.0]], [2.0], np.zeros((0, 2), dtype=int), stiffness=1.0)
     scene = Scene(particle, forces=[Gravity(particle.masses)], obstacles=[HalfSpace((0, 0, 0), normal, friction=mu)])
     dt, steps = 1e-3, 400

@@ -85,7 +85,7 @@ def test_point_field_force_is_minus_gradient_of_its_potential(cls, falloff):
     field = cls(rng.uniform(0.5, 2, 20), (0.1, 0.2, -0.1), 3.0, falloff=falloff, radius=1.2)
     h = 1e-6
     gradient = np.zeros_like(x)
-    for axis in range(3):  # central differences of the total potential, node by node through vectorisation
+    for axis in range(3):  # central differences of the total potential, moving one node at a time
         shift = np.zeros(3)
         shift[axis] = h
         up = [field.potential_energy(x + shift * (np.arange(20) == k)[:, None], 0) for k in range(20)]
