@@ -1,5 +1,6 @@
 """volspring: volumetric soft bodies as tetrahedral mass-spring models, checked against FEM."""
 
+from volspring.checkpoint import load_checkpoint, save_checkpoint
 from volspring.material import Material
 from volspring.mesh import TetMesh
 from volspring.model import FORCE_LAWS, STIFFNESS_RULES, SpringModel
@@ -21,4 +22,6 @@ __all__ = [
     "SpringTopology",
     "State",
     "TetMesh",
+    "load_checkpoint",
+    "save_checkpoint",
 ]
