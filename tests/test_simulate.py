@@ -40,6 +40,17 @@ def test_frames_fall_on_multiples_of_frame_dt():
     np.testing.assert_array_equal(result.total_energy, result.kinetic_energy + result.potential_energy)
 
 
+@pytest.mark.parametrize("energy_limit", [None, math.inf, 1e6])
+def test_frame_energies_are_those_of_the_frame_state(energy_limit):
+    scene = pair_scene()
+    result = simulate(scene, "midpoint", duration=0.05, dt=1e-3, frame_dt=0.01, state=stretched(scene),
+                      energy_limit=energy_limit)
+    final = result.state
+    assert result.kinetic_energy[-1] == scene.kinetic_energy(final.v)  # same computation, same bits
+    assert result.potential_energy[-1] == scene.potential_energy(final.x, final.t)
+    assert result.potential_energy[0] == pytest.approx(0.5 * 100.0 * 0.1**2, rel=1e-12)  # k u0^2 / 2
+
+
 def test_every_step_is_a_frame_without_frame_dt_and_odd_frame_dt_takes_the_next_step():
     scene = pair_scene()
     every = simulate(scene, "rk4", duration=0.02, dt=1e-3, state=stretched(scene))
