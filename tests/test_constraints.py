@@ -287,7 +287,7 @@ def test_strain_limit_holds_a_soft_hanging_rope_at_one_plus_tau(name):
         results[label] = worst
     # Unlimited, the top link (0.3 kg under it on 20 N/m over l0 = 1/6 m) stretches far beyond tau;
     # limited, never beyond tau plus the relaxation's tolerance (the last sweep met at most
-    # `tolerance` and only reduced it; measured excess ~0.95 tolerance).
+    # `tolerance` and only reduced it; measured excess 0.91-0.93 tolerance, free stretch 1.4).
     assert results["free"] > 3 * tau
     assert results["limited"] <= tau + tolerance, results
 
