@@ -22,12 +22,13 @@ Free unknowns are ordered node-major: unknown ``3 k + c`` is component c of free
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 
-from volspring.springs import _directions
 
-__all__ = ["BlockPattern", "system_blocks", "rigid_body_modes"]
+__all__ = ["BlockPattern", "SpringLinearization", "linearize_springs", "stiffness_times", "rigid_body_modes"]
 
 
 class BlockPattern:
@@ -96,6 +97,10 @@ class BlockPattern:
         # Scatter map: block data (nnzb, 9) = summation (nnzb, s) @ spring blocks (s, 9).
         self.summation = sp.csr_matrix((sign, (block_of[f:], owner)), shape=(self.block_count, s))
         self.summation.sum_duplicates()
+        # Flat positions of the diagonal entries of the diagonal blocks in the data array.
+        self.diagonal_entries = (9 * self.diagonal_blocks[:, None] + np.array([0, 4, 8])).ravel()
+        # (s, n) sparse: difference @ x = x_j - x_i for every spring (a sparse product beats fancy indexing).
+        self.difference = (-model.incidence.T).tocsr()
 
     @property
     def free_count(self) -> int:
@@ -114,12 +119,13 @@ class BlockPattern:
         data = (self.summation @ spring_blocks.reshape(-1, 9)).reshape(-1, 3, 3)
         if diagonal is not None:
             diagonal = np.asarray(diagonal, dtype=np.float64)
-            d = self.diagonal_blocks
             if diagonal.ndim == 3:
-                data[d] += diagonal
+                data[self.diagonal_blocks] += diagonal
             else:
-                c = np.arange(3)
-                data[d[:, None], c, c] += diagonal[:, None] if diagonal.ndim == 1 else diagonal
+                flat = data.reshape(-1)
+                if diagonal.ndim == 1:
+                    diagonal = np.repeat(diagonal, 3)
+                flat[self.diagonal_entries] += diagonal.ravel()
         if out is not None:
             out[...] = data
             return out
@@ -165,30 +171,62 @@ class BlockPattern:
         return out
 
 
-def system_blocks(model, x, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
-    """Per-spring blocks c_K H_e + c_D D_e in one pass, and what the right-hand side needs.
-
-    Equal to ``stiffness_scale * spring_stiffness_blocks(model, x) + damping_scale *
-    damper_blocks(model, x)`` but computed from the scalar coefficients of r r^T and I, so the
-    (s, 3, 3) array is written once.
+@dataclass(frozen=True, eq=False)
+class SpringLinearization:
+    """The springs' forces and Jacobian blocks at one configuration (from :func:`linearize_springs`).
 
     Parameters
     ----------
-    model : SpringModel
+    blocks : (s, 3, 3) float -- W_e = c_K H_e + c_D D_e
+    directions : (s, 3) float -- unit vectors r_e from i to j
+    lengths : (s,) float -- current lengths [m]
+    axial : (s,) float -- k_e, coefficient of r r^T in H_e [N/m]
+    transverse : (s,) float -- k_e (1 - l0/l), clamped if asked: coefficient of the transverse
+        projector in H_e [N/m]
+    forces : (n, 3) float -- spring (and damper, if velocities were given) forces on the nodes [N]
+    """
+
+    blocks: np.ndarray
+    directions: np.ndarray
+    lengths: np.ndarray
+    axial: np.ndarray
+    transverse: np.ndarray
+    forces: np.ndarray
+
+
+def linearize_springs(pattern, x, v=None, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
+    """Spring forces and the blocks c_K H_e + c_D D_e in one pass over the springs.
+
+    The blocks equal ``stiffness_scale * spring_stiffness_blocks(model, x) + damping_scale *
+    damper_blocks(model, x)`` and the forces ``spring_forces(model, x, v)``, but the directions
+    are computed once (with the pattern's sparse difference operator, much faster than fancy
+    indexing) and each block is written once from the scalar coefficients of r r^T and I.
+
+    Parameters
+    ----------
+    pattern : BlockPattern -- of the model
     x : (n, 3) float -- positions [m]
+    v : (n, 3) float, optional -- velocities [m/s]; without them the dampers exert no force
     stiffness_scale : float -- c_K (h^2 [s^2] for the implicit step, 1 for statics)
     damping_scale : float -- c_D (h [s] for the implicit step)
     clamp_compression : bool -- clamp the transverse term (1 - l0/l) at 0
 
     Returns
     -------
-    blocks : (s, 3, 3) float -- W_e
-    directions : (s, 3) float -- unit vectors r_e from i to j
-    axial : (s,) float -- k_e (the coefficient of r r^T in H_e) [N/m]
-    transverse : (s,) float -- k_e (1 - l0/l), clamped if asked (the coefficient of the
-        transverse projector in H_e) [N/m]
+    SpringLinearization
     """
-    r, length = _directions(model, x)
+    model = pattern.model
+    d = pattern.difference @ x
+    length = np.sqrt(np.einsum("ij,ij->i", d, d))
+    if length.size and not length.min() > 0.0:
+        e = int(np.argmin(length))
+        raise FloatingPointError(f"spring {e} between nodes {model.springs[e, 0]} and {model.springs[e, 1]} "
+                                 f"has length {length[e]}, expected > 0")
+    r = d / length[:, None]
+    magnitude = model.stiffness * (length - model.rest_lengths)
+    if v is not None and model.damping.any():
+        magnitude += model.damping * np.einsum("ij,ij->i", pattern.difference @ v, r)
+    forces = model.incidence @ (magnitude[:, None] * r)
     transverse = 1.0 - model.rest_lengths / length
     if clamp_compression:
         np.maximum(transverse, 0.0, out=transverse)
@@ -197,21 +235,21 @@ def system_blocks(model, x, *, stiffness_scale, damping_scale=0.0, clamp_compres
     if damping_scale:
         along += damping_scale * model.damping
     blocks = r[:, :, None] * (along[:, None] * r)[:, None, :]
-    blocks[:, [0, 1, 2], [0, 1, 2]] += (stiffness_scale * transverse)[:, None]
-    return blocks, r, model.stiffness, transverse
+    blocks.reshape(-1, 9)[:, ::4] += (stiffness_scale * transverse)[:, None]
+    return SpringLinearization(blocks, r, length, model.stiffness, transverse, forces)
 
 
-def stiffness_times(model, directions, axial, transverse, u) -> np.ndarray:
-    """(n, 3) float -- dF/dx @ u for the spring part, from :func:`system_blocks` output [N].
+def stiffness_times(pattern, linearization, u) -> np.ndarray:
+    """(n, 3) float -- dF/dx @ u for the springs at a linearization (forces per unit u) [N].
 
     H_e (u_j - u_i) = (k - k_t) r (r . du) + k_t du with k_t the transverse coefficient, added
     to node i and subtracted from node j.
     """
-    i, j = model.springs.T
-    du = u[j] - u[i]
-    along = (axial - transverse) * np.einsum("ij,ij->i", directions, du)
-    per_spring = along[:, None] * directions + transverse[:, None] * du
-    return model.incidence @ per_spring
+    lin = linearization
+    du = pattern.difference @ u
+    along = (lin.axial - lin.transverse) * np.einsum("ij,ij->i", lin.directions, du)
+    per_spring = along[:, None] * lin.directions + lin.transverse[:, None] * du
+    return pattern.model.incidence @ per_spring
 
 
 def rigid_body_modes(points) -> np.ndarray:

@@ -39,15 +39,15 @@ from __future__ import annotations
 
 import logging
 import math
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
-from volspring.assembly import BlockPattern, rigid_body_modes, stiffness_times, system_blocks
+from volspring.assembly import BlockPattern, linearize_springs, rigid_body_modes, stiffness_times
 from volspring.integrators.base import Integrator
 from volspring.scene import Scene, State
+from volspring import solvers
 from volspring.solvers import LINEAR_SOLVERS, SolveInfo, make_linear_solver
 
 __all__ = ["ImplicitEuler", "ImplicitStepInfo"]
@@ -68,7 +68,10 @@ class ImplicitStepInfo:
     solves : tuple of SolveInfo -- the linearised solve, then one per Newton iteration
     newton_residuals : (k + 1,) float -- ||M (v1 - v0) - h F(x1, v1, t + h)|| over the free
         nodes [N s] after the linearised solve and after each Newton iteration
-    forces_seconds, assembly_seconds, setup_seconds, solve_seconds : float -- where the time went [s]
+    forces_seconds : float -- spring forces with their Jacobian blocks (one pass) and scene forces [s]
+    assembly_seconds : float -- scene-force Jacobians, refill of the matrix, right-hand side [s]
+    setup_seconds : float -- AMG hierarchy (re)build in this step, 0 when reused [s]
+    solve_seconds : float -- linear solves (CG iterations or triangular solves) [s]
     rebuilt : bool -- the AMG hierarchy was (re)built in this step
     """
 
@@ -89,10 +92,9 @@ class _System:
 
     matrix: sp.bsr_matrix
     extra: sp.csr_matrix | None
-    blocks: np.ndarray  # (s, 3, 3) h^2 H + h D
-    directions: np.ndarray
-    axial: np.ndarray
-    transverse: np.ndarray
+    springs: object  # SpringLinearization: blocks h^2 H + h D, directions, spring forces
+    forces: np.ndarray  # (n, 3) all forces at (x, v, t) [N]
+    assembly_seconds: float
     extra_full: sp.csr_matrix | None  # -h dF/dv - h^2 dF/dx of scene forces, all unknowns
     extra_dfdx: sp.csr_matrix | None  # dF/dx of scene forces, all unknowns
 
@@ -177,8 +179,17 @@ class ImplicitEuler(Integrator):
         return self._pattern
 
     def _assemble(self, scene, pattern, x, v, t, h) -> _System:
-        blocks, directions, axial, transverse = system_blocks(
-            scene.model, x, stiffness_scale=h * h, damping_scale=h, clamp_compression=self.clamp_compression)
+        """Forces and the system matrix at (x, v, t) for step h.
+
+        The spring forces come out of the same pass as the blocks (:func:`linearize_springs`),
+        then every scene force accumulates its own, so ``forces`` equals ``scene.forces_at``.
+        """
+        springs = linearize_springs(pattern, x, v, stiffness_scale=h * h, damping_scale=h,
+                                    clamp_compression=self.clamp_compression)
+        forces = springs.forces
+        for force in scene.forces:
+            force.accumulate(x, v, t, forces)
+        clock = solvers.clock()
         dfdx = dfdv = None
         for force in scene.forces:
             jacobian = getattr(force, "jacobian", None)
@@ -204,8 +215,8 @@ class ImplicitEuler(Integrator):
                 diagonal = diagonal[:, None] + folded.reshape(-1, 3)
             else:
                 extra = restricted.tocsr()
-        matrix = pattern.matrix(blocks, diagonal)
-        return _System(matrix, extra, blocks, directions, axial, transverse, extra_full,
+        matrix = pattern.matrix(springs.blocks, diagonal)
+        return _System(matrix, extra, springs, forces, solvers.clock() - clock, extra_full,
                        None if dfdx is None else sp.csr_matrix(dfdx))
 
     # ------------------------------------------------------------------ hierarchy policy
@@ -214,7 +225,7 @@ class ImplicitEuler(Integrator):
         if _KEY + "amg_step" not in memory:
             return "first build"
         if memory[_KEY + "amg_x"].shape != (pattern.model.node_count, 3) or \
-                memory[_KEY + "dv"].shape != (pattern.size,):
+                int(memory[_KEY + "amg_size"]) != pattern.size:
             return "pattern changed"
         reference = max(5, int(memory[_KEY + "amg_iterations"]))
         if int(memory.get(_KEY + "iterations", 0)) > self.rebuild_growth * reference:
@@ -246,12 +257,11 @@ class ImplicitEuler(Integrator):
         x0, v0, t0 = state.x, state.v, state.t
         pattern = self.pattern(scene)
 
-        clock = time.perf_counter()
-        f0 = scene.forces_at(x0, v0, t0)
-        forces_seconds = time.perf_counter() - clock
-
-        clock = time.perf_counter()
+        clock = solvers.clock()
         system = self._assemble(scene, pattern, x0, v0, t0, h)
+        f0 = system.forces
+        forces_seconds = solvers.clock() - clock - system.assembly_seconds
+        clock = solvers.clock()
         # Velocity change of the prescribed nodes: where the pins must be at t + h.
         v1 = v0.copy()
         dv_prescribed = np.zeros_like(v0)
@@ -259,15 +269,15 @@ class ImplicitEuler(Integrator):
             nodes = scene.pins.nodes
             v1[nodes] = (scene.pins.positions(model.rest_positions, t0 + h) - x0[nodes]) / h
             dv_prescribed[nodes] = v1[nodes] - v0[nodes]
-        rhs = h * f0 + (h * h) * stiffness_times(model, system.directions, system.axial, system.transverse, v0)
+        rhs = h * f0 + (h * h) * stiffness_times(pattern, system.springs, v0)
         if system.extra_dfdx is not None:
             rhs += (h * h) * (system.extra_dfdx @ v0.ravel()).reshape(-1, 3)
         if scene.pins is not None and dv_prescribed.any():
-            rhs += pattern.boundary_coupling(system.blocks, dv_prescribed)
+            rhs += pattern.boundary_coupling(system.springs.blocks, dv_prescribed)
             if system.extra_full is not None:
                 rhs -= (system.extra_full @ dv_prescribed.ravel()).reshape(-1, 3)
         b = pattern.restrict(rhs)
-        assembly_seconds = time.perf_counter() - clock
+        assembly_seconds = solvers.clock() - clock + system.assembly_seconds
 
         setup_seconds, rebuilt = 0.0, False
         if self.method == "amg" and pattern.size:
@@ -277,6 +287,7 @@ class ImplicitEuler(Integrator):
                 setup_seconds = self._build(scene, pattern, system, x0, state.step, t0, h, v0)
                 rebuilt = True
                 memory.update({_KEY + "amg_step": int(state.step), _KEY + "amg_t": float(t0),
+                               _KEY + "amg_size": int(pattern.size),
                                _KEY + "amg_dt": h, _KEY + "amg_x": x0.copy(), _KEY + "amg_v": v0.copy()})
             elif not self._hierarchy_matches(memory, pattern):
                 # Resumed from a checkpoint (or another run used this integrator): rebuild the
@@ -300,15 +311,17 @@ class ImplicitEuler(Integrator):
 
         newton_residuals = []
         if self.newton_iterations and pattern.size:
-            newton_residuals.append(self._newton_residual(scene, pattern, state, v1, x1, h))
-            for _ in range(self.newton_iterations):
-                jacobian = self._assemble(scene, pattern, x1, v1, t0 + h, h)
-                delta, info = self._solve(jacobian, -newton_residuals[-1][1], None)
+            for iteration in range(self.newton_iterations + 1):
+                # Residual of M (v1 - v0) = h F(x0 + h v1, v1, t + h), and its Jacobian at the same point.
+                current = self._assemble(scene, pattern, x1, v1, t0 + h, h)
+                residual = pattern.restrict(model.masses[:, None] * (v1 - v0) - h * current.forces)
+                newton_residuals.append(float(np.linalg.norm(residual)))
+                if iteration == self.newton_iterations:
+                    break
+                delta, info = self._solve(current, -residual, None)
                 solves.append(info)
                 v1[pattern.free_nodes] += delta.reshape(-1, 3)
                 x1 = x0 + h * v1
-                newton_residuals.append(self._newton_residual(scene, pattern, state, v1, x1, h))
-            newton_residuals = [norm for norm, _ in newton_residuals]
 
         first = solves[0]
         if rebuilt or _KEY + "amg_iterations" not in memory:
@@ -322,10 +335,3 @@ class ImplicitEuler(Integrator):
 
     def _solve(self, system, b, warm):
         return self.solver.solve(system.matrix, b, x0=warm, extra=system.extra)
-
-    def _newton_residual(self, scene, pattern, state, v1, x1, h):
-        """(norm, vector) of M (v1 - v0) - h F(x1, v1, t + h) over the free unknowns."""
-        force = scene.forces_at(x1, v1, state.t + h)
-        residual = scene.model.masses[:, None] * (v1 - state.v) - h * force
-        vector = pattern.restrict(residual)
-        return float(np.linalg.norm(vector)), vector

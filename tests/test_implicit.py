@@ -1,0 +1,332 @@
+"""Implicit Euler: the assembled system, pins, stability far beyond the explicit limit, the
+linear solvers (direct, AMG-CG, Jacobi-CG), warm start, AMG scaling, failure reporting,
+a sagging beam, Newton iterations and bit-identical resume."""
+
+import copy
+import warnings
+
+import numpy as np
+import pytest
+import scipy.linalg
+import scipy.sparse as sp
+import scipy.sparse.linalg as sla
+from conftest import cube_mesh
+
+from volspring import Drag, Gravity, Material, Pins, Scene, SpringModel
+from volspring.assembly import BlockPattern, linearize_springs
+from volspring.errors import SolverNotConverged
+from volspring.integrators.implicit import ImplicitEuler
+from volspring.springs import damper_blocks, spring_forces, spring_stiffness_blocks
+
+RUBBER = Material(1e6, 0.25, 1000.0)
+
+
+def beam(cells, *, material=RUBBER, damping_ratio=0.0, length=1.0):
+    """A beam along x, cross-section length/5, pinned at x = 0, under gravity."""
+    width = length / 5
+    model = SpringModel.from_mesh(cube_mesh(cells, (length, width, width)), material, damping_ratio=damping_ratio)
+    pins = Pins(np.flatnonzero(model.rest_positions[:, 0] < 1e-9))
+    return Scene(model, forces=[Gravity(model.masses)], pins=pins)
+
+
+def omega_max(model, free=None) -> float:
+    """sqrt(largest eigenvalue of K v = lambda M v) over the free nodes [rad/s]."""
+    pattern = BlockPattern(model, free)
+    stiffness = pattern.matrix(linearize_springs(pattern, model.rest_positions, stiffness_scale=1.0).blocks)
+    scale = sp.diags(np.repeat(model.masses[pattern.free_nodes], 3) ** -0.5)
+    scaled = (scale @ stiffness.tocsr() @ scale).toarray()
+    if len(scaled) <= 1500:
+        return float(np.sqrt(scipy.linalg.eigvalsh(scaled)[-1]))
+    # Lanczos to 1e-8: far tighter than any use here (step sizes are set to a few digits).
+    return float(np.sqrt(sla.eigsh(sp.csr_matrix(scaled), k=1, which="LA", tol=1e-8, return_eigenvectors=False)[0]))
+
+
+def total_energy(scene, state):
+    return scene.kinetic_energy(state.v) + scene.potential_energy(state.x)
+
+
+class Tether:
+    """A test force with a non-diagonal Jacobian: f_a = -c (x_a - x_b), f_b = -f_a."""
+
+    def __init__(self, a, b, c, n):
+        self.a, self.b, self.c, self.n = a, b, c, n
+
+    def accumulate(self, x, v, t, out):
+        f = -self.c * (x[self.a] - x[self.b])
+        out[self.a] += f
+        out[self.b] -= f
+
+    def jacobian(self, x, v, t):
+        rows, cols, vals = [], [], []
+        for p, q, sign in ((self.a, self.a, -1), (self.a, self.b, 1), (self.b, self.a, 1), (self.b, self.b, -1)):
+            rows += [3 * p + c for c in range(3)]
+            cols += [3 * q + c for c in range(3)]
+            vals += [sign * self.c] * 3
+        return sp.csr_matrix((vals, (rows, cols)), shape=(3 * self.n, 3 * self.n)), None
+
+    def potential_energy(self, x, t):
+        return 0.5 * self.c * float(np.sum((x[self.a] - x[self.b]) ** 2))
+
+
+def dense_reference_step(scene, state, h):
+    """The linearised backward Euler step solved densely on all 3n unknowns, pins by elimination."""
+    model, x, v, t = scene.model, state.x, state.v, state.t
+    n = model.node_count
+    dfdx = np.zeros((3 * n, 3 * n))
+    dfdv = np.zeros((3 * n, 3 * n))
+    H = spring_stiffness_blocks(model, x)
+    D = damper_blocks(model, x)
+    for e, (i, j) in enumerate(model.springs):  # a loop is fine for a reference on a tiny mesh
+        for p, q, sign in ((i, i, -1), (i, j, 1), (j, i, 1), (j, j, -1)):
+            dfdx[3 * p:3 * p + 3, 3 * q:3 * q + 3] += sign * H[e]
+            dfdv[3 * p:3 * p + 3, 3 * q:3 * q + 3] += sign * D[e]
+    for force in scene.forces:
+        if hasattr(force, "jacobian"):
+            jx, jv = force.jacobian(x, v, t)
+            dfdx += 0 if jx is None else jx.toarray()
+            dfdv += 0 if jv is None else jv.toarray()
+    A = np.diag(np.repeat(model.masses, 3)) - h * dfdv - h * h * dfdx
+    b = h * (scene.forces_at(x, v, t).ravel() + h * dfdx @ v.ravel())
+    v1 = v.copy()
+    nodes = scene.pins.nodes
+    v1[nodes] = (scene.pins.positions(model.rest_positions, t + h) - x[nodes]) / h
+    dv_fixed = np.zeros(3 * n)
+    dv_fixed.reshape(-1, 3)[nodes] = v1[nodes] - v[nodes]
+    free = (3 * np.flatnonzero(scene.free)[:, None] + np.arange(3)).ravel()
+    b = b - A @ dv_fixed
+    dv = np.linalg.solve(A[np.ix_(free, free)], b[free])
+    v1.reshape(-1)[free] += dv
+    return A[np.ix_(free, free)], x + h * v1, v1
+
+
+@pytest.fixture
+def deformed_scene():
+    """A small damped cube with a moving pinned face, drag and a tether: every term of the system."""
+    model = SpringModel.from_mesh(cube_mesh((2, 2, 2)), RUBBER, damping_ratio=0.3)
+    n = model.node_count
+    face = np.flatnonzero(model.rest_positions[:, 0] < 1e-9)
+    rest = model.rest_positions[face]
+    pins = Pins(face, motion=lambda t: rest + [0.0, 0.0, 0.1 * t], velocity=lambda t: np.tile([0.0, 0.0, 0.1], (len(face), 1)))
+    scene = Scene(model, forces=[Gravity(model.masses), Drag(model.masses, 2.0), Tether(n - 1, n - 5, 3e4, n)],
+                  pins=pins)
+    rng = np.random.default_rng(1)
+    state = scene.initial_state(x=model.rest_positions + 0.04 * rng.standard_normal((n, 3)),
+                                v=0.3 * rng.standard_normal((n, 3)), t=0.2)
+    return scene, state
+
+
+def test_assembled_system_matches_dense_reference(deformed_scene):
+    scene, state = deformed_scene
+    h = 0.01
+    integrator = ImplicitEuler(solver="direct")
+    pattern = integrator.pattern(scene)
+    system = integrator._assemble(scene, pattern, state.x, state.v, state.t, h)
+    A_dense, x_ref, v_ref = dense_reference_step(scene, state, h)
+    A = system.matrix.toarray() + (0 if system.extra is None else system.extra.toarray())
+    # Same sums in a different order: agreement to a few ulps of the largest entry.
+    assert np.abs(A - A_dense).max() <= 1e-12 * np.abs(A_dense).max()
+    assert system.extra is not None  # the tether's off-diagonal Jacobian stays a separate term
+    # The spring forces of the fused pass equal the reference kernel's.
+    forces = scene.forces_at(state.x, state.v, state.t)
+    assert np.abs(system.forces - forces).max() <= 1e-12 * np.abs(forces).max()
+    new = integrator.step(scene, state, h)
+    # The direct solve is checked to 1e-8 relative residual; condition ~1e3 leaves ~1e-10 in v.
+    assert np.abs(new.v - v_ref).max() <= 1e-8 * np.abs(v_ref).max()
+    assert np.abs(new.x - x_ref).max() <= 1e-10
+
+
+def test_pinned_nodes_are_eliminated_and_never_move():
+    scene = beam((6, 2, 2))
+    integrator = ImplicitEuler()
+    pattern = integrator.pattern(scene)
+    assert pattern.size == 3 * scene.free.sum()
+    state = scene.initial_state()
+    h = 10.0 / omega_max(scene.model, scene.free)
+    for _ in range(20):
+        state = integrator.step(scene, state, h)
+        assert np.array_equal(state.x[scene.pins.nodes], scene.model.rest_positions[scene.pins.nodes])
+        assert not state.v[scene.pins.nodes].any()
+    assert state.x[:, 2].min() < -1e-4  # and the rest did move (sag)
+
+
+@pytest.mark.parametrize("E", [1e2, 1e5, 1e9])
+@pytest.mark.parametrize("mass_ratio", [1.0, 1e6])
+def test_stable_with_energy_non_increasing_at_1000x_explicit_limit(E, mass_ratio):
+    base = SpringModel.from_mesh(cube_mesh((3, 2, 2), (1.5, 1.0, 1.0)), Material(E, 0.25, 1000.0))
+    masses = base.masses * np.where(base.rest_positions[:, 0] > 0.75, mass_ratio, 1.0)  # a heavy half
+    model = SpringModel.from_arrays(base.rest_positions, masses, base.springs, stiffness=base.stiffness)
+    scene = Scene(model, pins=Pins(np.flatnonzero(model.rest_positions[:, 0] < 1e-9)))
+    h = 1000 * 2.0 / omega_max(model, scene.free)  # 1000 x the symplectic Euler / Verlet limit
+    rng = np.random.default_rng(0)
+    shape = model.rest_positions.shape
+    # 10 % strains, and velocities that would move a node by a comparable 5 cm in one step
+    state = scene.initial_state(x=model.rest_positions + 0.05 * rng.standard_normal(shape),
+                                v=(0.05 / h) * rng.standard_normal(shape))
+    integrator = ImplicitEuler()
+    energies = [total_energy(scene, state)]
+    for _ in range(30):
+        state = integrator.step(scene, state, h)
+        energies.append(total_energy(scene, state))
+    energies = np.array(energies)
+    # Non-increasing up to 1e-6 of the initial energy: the CG solve at rtol 1e-3 perturbs each
+    # step by far less than the scheme's own dissipation, round-off is ~1e-16.
+    assert (np.diff(energies) <= 1e-6 * energies[0]).all(), energies
+    assert np.abs(state.x - model.rest_positions).max() < 1.0  # bounded: back near rest, not blown up
+
+
+def test_direct_amg_and_jacobi_agree_to_the_solver_tolerance():
+    scene = beam((8, 2, 2), damping_ratio=0.1)
+    h = 50.0 / omega_max(scene.model, scene.free)
+    rtol = 1e-8
+    results = {}
+    for solver in ("direct", "amg", "jacobi"):
+        integrator = ImplicitEuler(solver=solver, rtol=rtol, maxiter=5000)
+        state = scene.initial_state()
+        for _ in range(3):
+            state = integrator.step(scene, state, h)
+        results[solver] = state.v
+    scale = np.abs(results["direct"]).max()
+    # A relative residual of 1e-8 with a condition number ~1e4 (h omega = 50, masses near uniform)
+    # bounds the relative error by ~1e-4; in practice it is far smaller.
+    for solver in ("amg", "jacobi"):
+        assert np.abs(results[solver] - results["direct"]).max() <= 1e-5 * scale
+
+
+def test_warm_start_reduces_iterations():
+    scene = beam((16, 4, 4), material=Material(1e8, 0.25, 1000.0))
+    h = 50.0 / omega_max(scene.model, scene.free)
+    integrator = ImplicitEuler(rtol=1e-6)
+    state = scene.initial_state()
+    warm, cold, guesses = 0, 0, []
+    for _ in range(20):
+        # the same step from the same state, without the previous dv (cold start from zero)
+        cold_state = state.replace(memory={k: v for k, v in state.memory.items() if not k.endswith(".dv")})
+        integrator.step(scene, cold_state, h)
+        cold += integrator.last_solve.iterations
+        state = integrator.step(scene, state, h)
+        warm += integrator.last_solve.iterations
+        guesses.append(integrator.last_solve.solves[0].initial_residual)
+    # The last dv is a fair guess of the next while the beam swings (measured: median relative
+    # residual ~0.3 instead of 1, 346 against 372 iterations over 30 steps)
+    assert np.median(guesses[1:]) < 0.6, guesses
+    assert warm < cold, (warm, cold)
+
+
+def _iterations(scene, h_omega, solver, steps=3, **options):
+    h = h_omega / omega_max(scene.model, scene.free)
+    integrator = ImplicitEuler(solver=solver, **options)
+    state = scene.initial_state()
+    counts = []
+    for _ in range(steps):
+        state = integrator.step(scene, state, h)
+        counts.append(integrator.last_solve.iterations)
+    return max(counts)
+
+
+def test_amg_iterations_roughly_independent_of_mesh_size_and_far_below_jacobi():
+    # Fixed h omega_max = 50, i.e. a fixed dt / element size ratio; 96 to 1395 nodes.
+    sizes = [(8, 2, 2), (16, 4, 4), (24, 6, 6)]
+    amg = [_iterations(beam(cells), 50.0, "amg") for cells in sizes]
+    # "Roughly independent": the largest count within 1.5x + 2 of the smallest (measured: 4-6).
+    assert max(amg) <= 1.5 * min(amg) + 2, amg
+    jacobi = _iterations(beam(sizes[-1]), 50.0, "jacobi", steps=1, maxiter=20000)
+    assert jacobi >= 5 * amg[-1], (jacobi, amg)
+
+
+@pytest.mark.slow
+def test_amg_iterations_independent_of_size_1k_to_50k():
+    sizes = [(40, 5, 5), (80, 10, 10), (140, 18, 18)]  # 1476, 10241, 51395 nodes
+    amg = [_iterations(beam(cells), 50.0, "amg", steps=3) for cells in sizes]
+    assert max(amg) <= 1.5 * min(amg) + 2, amg
+
+
+def test_non_convergence_raises_with_the_residual():
+    scene = beam((16, 4, 4))  # 1275 unknowns: more than the coarsest AMG level, so not solved exactly
+    h = 100.0 / omega_max(scene.model, scene.free)
+    with pytest.raises(SolverNotConverged, match=r"residual [0-9.e-]+"):
+        ImplicitEuler(rtol=1e-10, maxiter=1).step(scene, scene.initial_state(), h)
+    with pytest.raises(SolverNotConverged, match="residual"):
+        ImplicitEuler(solver="jacobi", rtol=1e-10, maxiter=1).step(scene, scene.initial_state(), h)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        ImplicitEuler(rtol=1e-10, maxiter=1, on_failure="warn").step(scene, scene.initial_state(), h)
+    assert any("residual" in str(w.message) for w in caught)
+
+
+def test_beam_sags_under_gravity_and_settles():
+    scene = beam((12, 3, 3), material=Material(1e8, 0.25, 1000.0))
+    h = 300.0 / omega_max(scene.model, scene.free)  # h omega_1 ~ 1 for the first bending mode
+    integrator = ImplicitEuler()
+    state = scene.initial_state()
+    energies, speeds, tips = [total_energy(scene, state)], [], []
+    for _ in range(100):
+        state = integrator.step(scene, state, h)
+        energies.append(total_energy(scene, state))
+        speeds.append(np.abs(state.v).max())
+        tips.append(state.x[:, 2].min())
+    energies = np.array(energies)
+    assert tips[-1] < -1e-3  # it sags (Euler-Bernoulli estimate q L^4 / 8 E I = 3.7 mm)
+    # settles: the fastest node has slowed to < 1e-6 of the peak speed, the tip stopped moving
+    assert speeds[-1] < 1e-6 * max(speeds)
+    assert abs(tips[-1] - tips[-2]) < 1e-9 * abs(tips[-1])
+    # energy decreasing (up to 1e-6 of the energy released: the CG solves stop at rtol 1e-3)
+    released = energies[0] - energies.min()
+    assert released > 0 and (np.diff(energies) <= 1e-6 * released).all()
+
+
+def test_newton_iterations_converge_to_the_fully_implicit_answer():
+    scene = beam((8, 2, 2), damping_ratio=0.05, material=Material(1e5, 0.25, 1000.0))
+    h = 5e-3  # large deflection in one step from rest: the linearisation is visibly off
+    state = scene.initial_state()
+    integrator = ImplicitEuler(solver="direct", newton_iterations=5)
+    new = integrator.step(scene, state, h)
+    residuals = integrator.last_solve.newton_residuals
+    assert len(residuals) == 6
+    # the clamped Hessian makes this a quasi-Newton iteration: still a drop by >= 1e4 over five
+    # iterations, down to round-off level
+    assert residuals[-1] < 1e-4 * residuals[0], residuals
+    # and the answer satisfies the nonlinear backward Euler equation
+    model = scene.model
+    residual = model.masses[:, None] * (new.v - state.v) - h * scene.forces_at(new.x, new.v, new.t)
+    assert np.abs(residual[scene.free]).max() < 1e-4 * np.abs(h * model.masses * 9.81).max()
+
+
+def test_resume_from_copied_state_is_bit_identical():
+    scene = beam((10, 2, 2))
+    h = 30.0 / omega_max(scene.model, scene.free)
+    options = dict(rebuild_every=3)  # several hierarchy builds on the way
+    integrator = ImplicitEuler(**options)
+    state = scene.initial_state()
+    states = []
+    for _ in range(10):
+        state = integrator.step(scene, state, h)
+        states.append(state)
+    checkpoint = copy.deepcopy(states[4])  # as if written to disk and read back
+    resumed = ImplicitEuler(**options)
+    state = checkpoint
+    for k in range(5, 10):
+        state = resumed.step(scene, state, h)
+        assert np.array_equal(state.x, states[k].x) and np.array_equal(state.v, states[k].v)
+    assert resumed.solver.build_count >= 2  # rebuilt from the record, then by the policy
+
+
+def test_step_does_not_modify_its_input_state():
+    scene = beam((6, 2, 2))
+    state = ImplicitEuler().step(scene, scene.initial_state(), 1e-3)
+    before = copy.deepcopy(state)
+    ImplicitEuler().step(scene, state, 1e-3)
+    assert np.array_equal(state.x, before.x) and np.array_equal(state.v, before.v)
+    assert state.memory.keys() == before.memory.keys()
+    assert all(np.array_equal(state.memory[k], before.memory[k]) for k in state.memory)
+
+
+def test_fused_forces_match_spring_forces():
+    model = SpringModel.from_mesh(cube_mesh((2, 2, 2)), RUBBER, damping_ratio=0.2)
+    rng = np.random.default_rng(3)
+    x = model.rest_positions + 0.05 * rng.standard_normal(model.rest_positions.shape)
+    v = rng.standard_normal(x.shape)
+    lin = linearize_springs(BlockPattern(model), x, v, stiffness_scale=2.0, damping_scale=3.0)
+    reference = spring_forces(model, x, v)
+    assert np.abs(lin.forces - reference).max() <= 1e-12 * np.abs(reference).max()
+    blocks = 2.0 * spring_stiffness_blocks(model, x) + 3.0 * damper_blocks(model, x)
+    assert np.abs(lin.blocks - blocks).max() <= 1e-12 * np.abs(blocks).max()
