@@ -25,7 +25,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import Delaunay
 
-from meshing.anchor import anchor
+from meshing import anchor
 from volspring import TetMesh
 from volspring.mesh import signed_tet_volumes
 

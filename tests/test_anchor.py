@@ -10,8 +10,8 @@ import trimesh
 from conftest import cube_mesh
 from scipy.spatial import Delaunay
 
-import meshing.anchor as anchor_module
-from meshing.anchor import Anchor, anchor
+import meshing.anchoring as anchor_module
+from meshing.anchoring import Anchor, anchor
 from volspring import TetMesh
 
 # Tolerances. 1e-10 is the acceptance figure of issue 2 for rest and affine reproduction; the measured errors are
@@ -125,7 +125,7 @@ def test_outside_vertices_take_the_nearest_tet_and_their_distance():
 
 def test_far_outside_vertices_are_logged_and_can_be_refused(caplog):
     mesh = cube_mesh((2, 2, 2))
-    with caplog.at_level(logging.INFO, logger="meshing.anchor"):
+    with caplog.at_level(logging.INFO, logger="meshing.anchoring"):
         anchor(mesh, np.array([[0.5, 0.5, 0.5], [5.0, 0.5, 0.5]]))
     assert any(r.levelno == logging.WARNING and "1 of 2 surface vertices lie outside" in r.message
                for r in caplog.records)
@@ -156,7 +156,7 @@ def test_finer_render_surface_on_a_cube():
 def test_real_bunny_surface_anchors_into_its_tet_mesh(bunny, caplog):
     mesh, surface = bunny
     assert len(surface.vertices) == 502  # the merged surface of ../shared/data/README.md
-    with caplog.at_level(logging.INFO, logger="meshing.anchor"):
+    with caplog.at_level(logging.INFO, logger="meshing.anchoring"):
         bound = anchor(mesh, surface)
     assert bound.point_count == 502 and (bound.tet_index >= 0).all()
     # The data README: about 60% of the vertices a hair outside, barycentric coordinates down to about -0.016.

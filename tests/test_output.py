@@ -165,7 +165,7 @@ def test_model_without_mesh_writes_springs_only(tmp_path):
 def anchored(mesh):
     import trimesh
 
-    from meshing.anchor import anchor
+    from meshing import anchor
 
     ball = trimesh.creation.icosphere(subdivisions=2, radius=0.2)
     ball.apply_translation([0.5, 0.25, 0.25])

@@ -359,7 +359,7 @@ def _anchored_surface(path, model):
     """A render surface file bound to the model's tet mesh, vertices in the file's order."""
     import trimesh
 
-    from meshing.anchor import anchor
+    from meshing import anchor
 
     if not path.is_file():
         raise _InputError(f"no render surface file at {path}")

@@ -1,6 +1,6 @@
 """Blender output: the render surface per frame as an OBJ sequence and as one PC2 point cache.
 
-The render surface is either an anchored surface (``meshing.anchor.anchor(tet_mesh, surface)``,
+The render surface is either an anchored surface (``meshing.anchor(tet_mesh, surface)``,
 anything with ``deform(x) -> (p, 3)`` and ``faces``) or, by default, the boundary surface of
 the tet mesh (:class:`BoundarySurface`).
 

@@ -148,7 +148,7 @@ def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = 1e-9, max_distance:
     --------
     >>> import numpy as np
     >>> from volspring import TetMesh
-    >>> from meshing.anchor import anchor
+    >>> from meshing import anchor
     >>> mesh = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
     >>> bound = anchor(mesh, np.array([[0.1, 0.2, 0.3], [0.5, 0.5, 0.5]]))
     >>> bound.outside.tolist(), np.allclose(bound.deform(2 * mesh.points), 2 * bound.points)
