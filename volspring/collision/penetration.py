@@ -130,6 +130,11 @@ def _closest_surface(bodies: CollisionBodies, x, vertex, other, normals):
     return depth, _normalized(direction)[0]
 
 
+def _scatter(index, weights, count):
+    """``out[i] = sum of weights[index == i]``, (count,) float64 (also for empty input, where bincount gives int)."""
+    return np.bincount(index, weights, count).astype(np.float64, copy=False)
+
+
 def _normalized(vectors):
     length = np.linalg.norm(vectors, axis=1)
     ok = length > 1e-12  # unit-vector sums: below 1e-12 they have cancelled
@@ -258,9 +263,9 @@ def consistent_penetration_depths(bodies: CollisionBodies, positions, contacts: 
     # Phase 3: border depth and direction, 1/|x_i - p|^2 weights.
     offset = hit_point - x[vertex[hit_owner]]
     weight = 1.0 / np.maximum(np.einsum("ij,ij->i", offset, offset), floor)
-    total = np.bincount(hit_owner, weight, count)
-    depth = np.bincount(hit_owner, weight * np.einsum("ij,ij->i", offset, hit_normal), count)
-    direction = np.stack([np.bincount(hit_owner, weight * hit_normal[:, i], count) for i in range(3)], axis=1)
+    total = _scatter(hit_owner, weight, count)
+    depth = _scatter(hit_owner, weight * np.einsum("ij,ij->i", offset, hit_normal), count)
+    direction = np.stack([_scatter(hit_owner, weight * hit_normal[:, i], count) for i in range(3)], axis=1)
     border = total > 0
     depth = np.divide(depth, total, out=np.zeros(count), where=border)
     direction, ok = _normalized(direction)
@@ -278,10 +283,10 @@ def consistent_penetration_depths(bodies: CollisionBodies, positions, contacts: 
         t, s = target[frontier], source[frontier]
         delta = x[vertex[s]] - x[vertex[t]]
         mu = 1.0 / np.maximum(np.einsum("ij,ij->i", delta, delta), floor)
-        total = np.bincount(t, mu, count)
+        total = _scatter(t, mu, count)
         new = (total > 0) & ~done
-        summed = np.bincount(t, mu * (np.einsum("ij,ij->i", delta, direction[s]) + depth[s]), count)
-        r = np.stack([np.bincount(t, mu * direction[s, i], count) for i in range(3)], axis=1)
+        summed = _scatter(t, mu * (np.einsum("ij,ij->i", delta, direction[s]) + depth[s]), count)
+        r = np.stack([_scatter(t, mu * direction[s, i], count) for i in range(3)], axis=1)
         r, ok = _normalized(r)
         depth[new] = summed[new] / total[new]
         direction[new] = r[new]
