@@ -1,6 +1,8 @@
 """volspring: volumetric soft bodies as tetrahedral mass-spring models, checked against FEM."""
 
 from volspring.checkpoint import load_checkpoint, save_checkpoint
+from volspring.constraints import DistanceConstraints, HalfSpace, StrainLimit
+from volspring.fields import CallableForce, PointAttractor, PointRepulser, Vortex, Wind
 from volspring.material import Material
 from volspring.mesh import TetMesh
 from volspring.model import FORCE_LAWS, STIFFNESS_RULES, SpringModel
@@ -10,6 +12,14 @@ from volspring.topology import SPRING_KINDS, SpringTopology
 __version__ = "0.1.0"
 
 __all__ = [
+    "CallableForce",
+    "DistanceConstraints",
+    "HalfSpace",
+    "PointAttractor",
+    "PointRepulser",
+    "StrainLimit",
+    "Vortex",
+    "Wind",
     "Drag",
     "FORCE_LAWS",
     "Gravity",

@@ -94,7 +94,8 @@ class Pins:
         if self.velocity is not None:
             return self._checked(self.velocity(t), "velocity", t)
         h = 1e-6  # central difference: O(h^2) error, far below any simulation step
-        return (self._checked(self.motion(t + h), "motion", t) - self._checked(self.motion(t - h), "motion", t)) / (2 * h)
+        ahead, behind = (self._checked(self.motion(t + d), "motion", t) for d in (h, -h))
+        return (ahead - behind) / (2 * h)
 
     def _checked(self, value, name, t):
         value = np.asarray(value, dtype=np.float64)
