@@ -151,6 +151,14 @@ def test_blow_up_raises_simulation_diverged_and_no_nan_reaches_the_callback():
     assert f"step {error.step}" in str(error)
 
 
+def test_runaway_is_caught_between_frames_too():
+    scene, state, dt = blowing_up()
+    with pytest.raises(SimulationDiverged, match="runaway energy") as caught:
+        simulate(scene, "verlet", duration=1000 * dt, dt=dt, state=state, frame_dt=500 * dt, guard="off")
+    # Checked every ENERGY_CHECK_INTERVAL = 8 steps between frames, long before NaN (~200 steps).
+    assert caught.value.step % 8 == 0 and caught.value.step < 100
+
+
 def test_nan_is_reported_when_the_energy_check_is_off():
     scene, state, dt = blowing_up()
     with np.errstate(all="ignore"), pytest.raises(SimulationDiverged, match="not finite") as caught:

@@ -14,8 +14,11 @@ counts this run's frames from 0). A callback that returns ``False`` (exactly ``F
 a falsy value) stops the run after that frame; ``result.stopped_early`` says so.
 
 Divergence. :meth:`Integrator.step` raises :class:`SimulationDiverged` on NaN or Inf, so no
-non-finite state ever reaches the callback. Runaway energy also raises it, checked after every
-step on the total energy E = kinetic + potential (springs and forces with a potential):
+non-finite state ever reaches the callback. Runaway energy also raises it, checked at every
+frame and at least every ``ENERGY_CHECK_INTERVAL`` = 8 steps (an energy costs about one force
+evaluation: checking every step would double the cost of a symplectic Euler step, while an
+unstable mode needs well over 8 steps to go from visible to overflow) on the total energy
+E = kinetic + potential (springs and forces with a potential):
 
 - with ``energy_limit`` [J]: when E > energy_limit (``math.inf`` turns the check off);
 - by default: when E - E_0 - W > ``runaway_factor`` * S, where W is the work done so far by
@@ -24,9 +27,9 @@ step on the total energy E = kinetic + potential (springs and forces with a pote
   (L the diagonal of the rest bounding box, F_ext the scene's forces at the start: for gravity
   S includes M g L, the work of falling one body size). A conservative run keeps E - E_0 - W near
   0 (integrator error only), while an unstable one grows it geometrically. Dampers only remove
-  energy and are not counted. Tracking W costs one more evaluation of those forces per step,
-  and the check one energy evaluation per step. The work of moving pins is not tracked, so with
-  moving pins (or when S = 0: nothing can move) the default check is off; NaN detection remains.
+  energy and are not counted. Tracking W costs one more evaluation of those forces per step.
+  The work of moving pins is not tracked, so with moving pins (or when S = 0: nothing can
+  move) the default check is off; NaN detection remains.
 The error names the step, time, dt and the node with the largest kinetic energy. Two limits of
 the default check: energies are measured with the state's velocity, which for symplectic Euler
 and the Verlet family is the half-step one, so a stable run close to the stability limit shows a
@@ -52,11 +55,12 @@ from volspring.scene import Scene, State
 from volspring.springs import spring_energy
 from volspring.stability import GUARD_ACTIONS, StabilityGuard
 
-__all__ = ["simulate", "SimulationResult", "RUNAWAY_FACTOR"]
+__all__ = ["simulate", "SimulationResult", "RUNAWAY_FACTOR", "ENERGY_CHECK_INTERVAL"]
 
 logger = logging.getLogger(__name__)
 
 RUNAWAY_FACTOR = 10.0  # default: energy may exceed its start plus work by 10x the start's energy scale
+ENERGY_CHECK_INTERVAL = 8  # energy checked at every frame and at least every 8 steps (see the docstring)
 _FRAME_SLACK = 1e-6    # a step within this fraction of dt of a frame time is on it (round-off of t += dt)
 
 
@@ -138,21 +142,20 @@ class _EnergyMonitor:
             self.latest = state
         return self.kinetic, self.potential
 
-    def after_step(self, before: State, after: State, dt: float) -> None:
-        if self.limit is None and not self.active:
-            return  # nothing to check: energies are computed at frames only
-        self.kinetic, self.potential = self.recorded(after)
-        total = self.kinetic + self.potential
+    def after_step(self, before: State, after: State, dt: float, *, check: bool) -> None:
+        """Account the step's work; with ``check``, compare the energy with the limit or allowance."""
+        if self.active and self.forces_before is not None:
+            forces_after = self._nonconservative_forces(after)
+            self.work += 0.5 * float(np.sum((self.forces_before + forces_after) * (after.x - before.x)))
+            self.forces_before = forces_after
+        if not check or (self.limit is None and not self.active):
+            return
+        kinetic, potential = self.recorded(after)
+        total = kinetic + potential
         if self.limit is not None:
             if total > self.limit:
                 self._diverged(after, dt, f"total energy {total:.6g} J is above energy_limit = {self.limit:.6g} J")
             return
-        if not self.active:
-            return
-        if self.forces_before is not None:
-            forces_after = self._nonconservative_forces(after)
-            self.work += 0.5 * float(np.sum((self.forces_before + forces_after) * (after.x - before.x)))
-            self.forces_before = forces_after
         excess = total - self.start - self.work
         if not excess <= self.allowance:
             self._diverged(after, dt, f"runaway energy: total {total:.6g} J exceeds start {self.start:.6g} J "
@@ -254,9 +257,10 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
     while not stopped and taken < step_count:
         new = integrator.step(scene, state, dt)
         taken += 1
-        monitor.after_step(state, new, dt)
+        is_frame = upcoming is None or new.t >= upcoming - slack
+        monitor.after_step(state, new, dt, check=is_frame or taken % ENERGY_CHECK_INTERVAL == 0)
         state = new
-        if upcoming is None or state.t >= upcoming - slack:
+        if is_frame:
             stopped = not frame(state)
             upcoming = next_frame_time(state.t)
     if stopped:
