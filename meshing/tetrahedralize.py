@@ -39,7 +39,7 @@ def estimated_tet_count(volume: float, size: float) -> float:
 
 
 def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | None = None,
-                   enclose: bool = False, feature_angle: float = 40.0, verbose: bool = False) -> TetMesh:
+                   feature_angle: float = 40.0, verbose: bool = False) -> TetMesh:
     """Fill a closed surface with tetrahedra of edge length about ``size``.
 
     Parameters
@@ -58,9 +58,6 @@ def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | No
         Flat and sliver tets on the boundary are peeled off (logged), and boundary edges or vertices
         that are not manifold are fixed by adding the band tets around them (logged).
     seed : int, optional -- random seed (the lattice jitter; gmsh's ``Mesh.RandomSeed``)
-    enclose : bool -- delaunay only: keep the whole band of tets outside the surface as well, so that
-        the mesh encloses the surface (the seed's variant); the volume then exceeds the surface's by
-        about area x ``size``/4
     feature_angle : float -- gmsh only, triangle surfaces: dihedral angle [degrees] above which an edge is
         kept as a sharp feature
     verbose : bool -- let gmsh print its progress
@@ -114,7 +111,7 @@ def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | No
         shape = isinstance(surface, Shape)
         if shape:
             surface = surface.surface(size=size)
-        points, tets = _delaunay_tets(surface, size, seed, enclose, movable_surface=shape)
+        points, tets = _delaunay_tets(surface, size, seed, movable_surface=shape)
     mesh = TetMesh.compact(points, tets)
     logger.info("%s: %d nodes, %d tets, volume %.6g (surface %.6g)", method, mesh.node_count,
                 mesh.tet_count, mesh.volume, volume)
@@ -167,6 +164,8 @@ def _gmsh_add_triangles(gmsh, surface, feature_angle):
 def _gmsh_generate(gmsh, size, seed):
     gmsh.option.setNumber("Mesh.MeshSizeMin", 0.0)
     gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+    # Sizes attached to geometry points (for a triangle surface: its own edge lengths) would override `size`.
+    gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
     gmsh.option.setNumber("Mesh.Optimize", 1)
     gmsh.option.setNumber("Mesh.OptimizeNetgen", 1)
     if seed is not None:
@@ -182,7 +181,7 @@ def _gmsh_generate(gmsh, size, seed):
 
 
 # ---------------------------------------------------------------------- delaunay
-def _delaunay_tets(surface, size, seed, enclose, movable_surface):
+def _delaunay_tets(surface, size, seed, movable_surface):
     import trimesh
     from scipy.spatial import Delaunay, cKDTree
 
@@ -229,17 +228,20 @@ def _delaunay_tets(surface, size, seed, enclose, movable_surface):
     # The band: tets outside the surface whose centroid lies within the offset surface through the band points.
     offset = vertices + _BAND * size * surface.vertex_normals
     in_band = ~inside & (winding_numbers(offset, faces, centroids) > 0)
+    # Tets made of band points only are the slivers of the convex hull's skin, not part of the band layer.
+    in_band &= ~(tets >= surface_count + len(lattice)).all(axis=1)
     volumes, _, ratio = _raw_metrics(points, tets)
     flat = volumes <= 1e-12 * np.ptp(points[tets], axis=1).max(axis=1) ** 3  # the TetMesh zero-volume rule
     sliver = flat | (ratio < _SLIVER_RADIUS_RATIO)
-    keep = (inside | in_band) if enclose else inside.copy()
-    keep &= ~flat
+    keep = inside & ~flat
     logger.info("delaunay: %d points (%d surface, %d lattice, %d band), %d tets, %d kept (%s)", len(points),
-                surface_count, len(lattice), len(band), len(tets), keep.sum(), "inside + band" if enclose else "inside")
+                surface_count, len(lattice), len(band), len(tets), keep.sum(), "centroid inside")
     keep = _peel_slivers(tets, keep, sliver)
-    usable = ~flat & (inside | in_band)
-    keep = _covering(tets, keep, usable, ratio, surface_count)
-    keep = _repair_boundary(tets, keep, in_band & ~sliver, len(points), surface_count)
+    # Band tets glued to a flat tet would wall it in: a zero-volume void with two different triangulations
+    # of one planar quad on its sides, which no choice of tets can make manifold. Never add those.
+    addable = in_band & ~sliver & ~_touches_flat(tets, flat, len(points))
+    keep = _covering(tets, keep, addable | (inside & ~flat), ratio, surface_count)
+    keep = _repair_boundary(tets, keep, addable, len(points), surface_count)
     interior_slivers = (keep & sliver).sum()
     if interior_slivers:
         logger.info("delaunay: kept %d interior sliver(s) (radius ratio < %g) to avoid voids",
@@ -248,10 +250,10 @@ def _delaunay_tets(surface, size, seed, enclose, movable_surface):
 
 
 def _slid_along_surface(surface, movable, rng):
-    """Move vertices within their flat neighbourhood or along their straight crease, by up to 0.1 x their
-    shortest edge, so that grids of cocircular points (flat faces, straight edges) stop being degenerate
-    for Delaunay: qhull triangulates such ties with flat tets whose removal tears the boundary.
-    The surface as a point set is unchanged; curved vertices and fixed ones do not move."""
+    """Move the movable vertices within their flat neighbourhood or along their straight crease by up to
+    0.1 x their shortest edge (curved ones: 0.05 x, in their tangent plane), so that grids of cocircular
+    points stop being degenerate for Delaunay: qhull triangulates such ties with flat tets whose removal
+    tears the boundary or leaves a void. Flat and crease moves leave the surface as a point set unchanged."""
     import trimesh
 
     vertex_faces = surface.vertex_faces  # (n, k) padded with -1
@@ -270,16 +272,28 @@ def _slid_along_surface(surface, movable, rng):
     line = np.cross(first[crease], other[crease])
     line /= np.linalg.norm(line, axis=1)[:, None]
     direction[crease] = line * rng.choice([-1.0, 1.0], size=(len(line), 1))
+    # Curved vertices (movable ones only: built-in shapes) slide in their tangent plane, which breaks the
+    # mirror symmetries of icospheres and tori; they leave the exact surface by (step)^2 / (2 rho) at most.
+    curved = ~flat & ~crease
+    normal = surface.vertex_normals[curved]
+    direction[curved] -= np.einsum("nj,nj->n", direction[curved], normal)[:, None] * normal
     direction /= np.linalg.norm(direction, axis=1)[:, None]
     shortest = np.full(len(first), np.inf)
     np.minimum.at(shortest, surface.edges_unique.ravel(), np.repeat(surface.edges_unique_length, 2))
-    move = movable & (flat | crease)
-    step = np.where(move, 0.1 * shortest * rng.uniform(0.2, 1.0, len(first)), 0.0)
+    step = np.where(movable, np.where(curved, 0.05, 0.1) * shortest * rng.uniform(0.2, 1.0, len(first)), 0.0)
     vertices = surface.vertices + step[:, None] * direction
     # Keep no move that turns a face over (cannot happen at 0.1 x the shortest edge on sane grids; checked anyway).
     turned = np.einsum("ij,ij->i", trimesh.triangles.normals(vertices[surface.faces])[0], surface.face_normals) < 0.5
     vertices[np.unique(surface.faces[turned])] = surface.vertices[np.unique(surface.faces[turned])]
     return trimesh.Trimesh(vertices, surface.faces, process=False)
+
+
+def _touches_flat(tets, flat, node_count):
+    """(m,) bool -- tets that share a face with a flat tet."""
+    faces = np.sort(tets[:, TET_FACES], axis=2).reshape(-1, 3)
+    key = (faces[:, 0] * node_count + faces[:, 1]) * node_count + faces[:, 2]
+    flat_faces = key[np.repeat(flat, 4)]
+    return np.isin(key, flat_faces).reshape(-1, 4).any(axis=1) & ~flat
 
 
 def _thinned(points, distance):
