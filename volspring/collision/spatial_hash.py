@@ -54,10 +54,15 @@ def expand_ranges(starts, counts) -> tuple[np.ndarray, np.ndarray]:
     return owner, index
 
 
+def _all3(flags) -> np.ndarray:
+    """``flags.all(axis=1)`` for (k, 3) bool, column by column (several times faster for small rows)."""
+    return flags[:, 0] & flags[:, 1] & flags[:, 2]
+
+
 def _box_cells(cell_lo, cell_hi):
     """Every cell of each integer box: ``(owner (K,), cells (K, 3))``, variable sizes expanded by np.repeat."""
     size = cell_hi - cell_lo + 1
-    owner, local = expand_ranges(np.zeros(len(size), dtype=np.int64), size.prod(axis=1))
+    owner, local = expand_ranges(np.zeros(len(size), dtype=np.int64), size[:, 0] * size[:, 1] * size[:, 2])
     ny, nz = size[owner, 1], size[owner, 2]
     offset = np.stack([local // (ny * nz), (local // nz) % ny, local % nz], axis=1)
     return owner, cell_lo[owner] + offset
@@ -141,13 +146,17 @@ class SpatialHash:
         base = cell_hash(cells, self.table_size) * self.group_count
         g = groups[owner]
         search = lambda key: np.searchsorted(self.keys, key)  # noqa: E731
+        # Most query cells are empty: find the whole bucket first and look inside only non-empty ones.
+        first, stop = search(base), search(base + self.group_count)
+        busy = np.flatnonzero(stop > first)
+        owner, cells, base, g, first, stop = owner[busy], cells[busy], base[busy], g[busy], first[busy], stop[busy]
         if rule == "all":
-            ranges = [(search(base), search(base + self.group_count))]
+            ranges = [(first, stop)]
         elif rule == "same":
             ranges = [(search(base + g), search(base + g + 1))]
         else:
             own_lo, own_hi = search(base + g), search(base + g + 1)
-            ranges = [(search(base), own_lo), (own_hi, search(base + self.group_count))]
+            ranges = [(first, own_lo), (own_hi, stop)]
         pieces = []
         for lo, hi in ranges:  # one or two ranges per query cell, never a loop over items
             cell_index, entry = expand_ranges(lo, np.maximum(hi - lo, 0))
@@ -158,10 +167,10 @@ class SpatialHash:
         item = self.entry_item[entry]
         # Hash collisions: keep an entry only if it is really in the cell that was looked up, and report
         # each pair only in one cell, the low corner of the overlap of the two cell ranges.
-        keep = (self.entry_cell[entry] == qcell).all(axis=1)
-        keep &= (np.maximum(q_cell_lo[q], self.item_cell_lo[item]) == qcell).all(axis=1)
+        keep = _all3(self.entry_cell[entry] == qcell)
+        keep &= _all3(np.maximum(q_cell_lo[q], self.item_cell_lo[item]) == qcell)
         q, item = q[keep], item[keep]
-        overlap = ((self.item_lo[item] <= query_hi[q]) & (self.item_hi[item] >= query_lo[q])).all(axis=1)
+        overlap = _all3((self.item_lo[item] <= query_hi[q]) & (self.item_hi[item] >= query_lo[q]))
         return q[overlap], item[overlap]
 
 
@@ -246,7 +255,9 @@ def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, tab
     x = bodies.stack_positions(positions)
     cell_size = bodies.mean_edge_length if cell_size is None else float(cell_size)
     corners = x[bodies.tets]
-    tet_lo, tet_hi = corners.min(axis=1), corners.max(axis=1)
+    c = [corners[:, i] for i in range(4)]  # pairwise min/max: faster than a reduce over an axis of 4
+    tet_lo = np.minimum(np.minimum(c[0], c[1]), np.minimum(c[2], c[3]))
+    tet_hi = np.maximum(np.maximum(c[0], c[1]), np.maximum(c[2], c[3]))
     active_vertex = np.ones(bodies.node_count, dtype=bool)
     active_tet = np.ones(bodies.tet_count, dtype=bool)
     if not self_collision:
@@ -257,8 +268,8 @@ def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, tab
         others_lo = np.where(itself, np.inf, body_lo[None]).min(axis=1)
         others_hi = np.where(itself, -np.inf, body_hi[None]).max(axis=1)
         nb, tb = bodies.node_body, bodies.tet_body
-        active_vertex = ((x >= others_lo[nb]) & (x <= others_hi[nb])).all(axis=1)
-        active_tet = ((tet_hi >= others_lo[tb]) & (tet_lo <= others_hi[tb])).all(axis=1)
+        active_vertex = _all3((x >= others_lo[nb]) & (x <= others_hi[nb]))
+        active_tet = _all3((tet_hi >= others_lo[tb]) & (tet_lo <= others_hi[tb]))
     vertices = np.flatnonzero(active_vertex)
     tets = np.flatnonzero(active_tet)
     grid = SpatialHash.build(x[vertices], x[vertices], cell_size=cell_size, table_size=table_size,
@@ -272,7 +283,7 @@ def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, tab
     # Barycentric test with A^-1 precomputed per active tet (one 3x3 adjugate each).
     inverse, valid = tet_inverse_rows(*(corners[tets, i] for i in range(4)))
     beta = np.einsum("kij,kj->ki", inverse[local_tet], x[vertex] - corners[tet, 0])
-    inside = valid[local_tet] & (beta >= 0.0).all(axis=1) & (beta.sum(axis=1) <= 1.0)
+    inside = valid[local_tet] & _all3(beta >= 0.0) & (beta[:, 0] + beta[:, 1] + beta[:, 2] <= 1.0)
     tet, vertex, beta = tet[inside], vertex[inside], beta[inside]
     order = np.lexsort((tet, vertex))
     tet, vertex, beta = tet[order], vertex[order], beta[order]
