@@ -224,10 +224,11 @@ def _iterations(scene, h_omega, solver, steps=3, **options):
 
 
 def test_amg_iterations_roughly_independent_of_mesh_size_and_far_below_jacobi():
-    # Fixed h omega_max = 50, i.e. a fixed dt / element size ratio; 96 to 1395 nodes.
+    # Fixed h omega_max = 50, i.e. a fixed dt / element size ratio; 81 to 1225 nodes.
     sizes = [(8, 2, 2), (16, 4, 4), (24, 6, 6)]
     amg = [_iterations(beam(cells), 50.0, "amg") for cells in sizes]
-    # "Roughly independent": the largest count within 1.5x + 2 of the smallest (measured: 4-6).
+    # "Roughly independent": the largest count within 1.5x + 2 of the smallest (measured: 7, 7, 7;
+    # Jacobi-CG needed 191 on the largest).
     assert max(amg) <= 1.5 * min(amg) + 2, amg
     jacobi = _iterations(beam(sizes[-1]), 50.0, "jacobi", steps=1, maxiter=20000)
     assert jacobi >= 5 * amg[-1], (jacobi, amg)
