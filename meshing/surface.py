@@ -288,7 +288,8 @@ def winding_numbers(vertices, faces, points, *, chunk: int = 2_000_000) -> np.nd
     face = np.repeat(np.arange(len(tri)), count)
     local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
     sx = np.repeat(span[:, 0], count)
-    key = (np.repeat(first_cell[:, 0], count) + local % sx) * columns[1] + np.repeat(first_cell[:, 1], count) + local // sx
+    column_x = np.repeat(first_cell[:, 0], count) + local % sx
+    key = column_x * columns[1] + np.repeat(first_cell[:, 1], count) + local // sx
     order = np.argsort(key, kind="stable")
     key, face = key[order], face[order]
 

@@ -141,8 +141,10 @@ def _gmsh_tets(surface, size, seed, feature_angle, verbose):
                 break
             except Exception as error:  # gmsh raises bare Exception
                 if attempt == len(angles) - 1:
-                    raise ValueError(f"gmsh could not remesh the surface at feature angles {angles}: {error}") from error
-                logger.info("gmsh failed at feature angle %g degrees (%s); trying %g", angle, error, angles[attempt + 1])
+                    raise ValueError(
+                        f"gmsh could not remesh the surface at feature angles {angles}: {error}") from error
+                logger.info("gmsh failed at feature angle %g degrees (%s); trying %g", angle, error,
+                            angles[attempt + 1])
     offsets = np.cumsum([0] + [len(points) for points, _ in parts[:-1]])
     return (np.concatenate([points for points, _ in parts]),
             np.concatenate([tets + offset for (_, tets), offset in zip(parts, offsets)]))
@@ -358,8 +360,11 @@ def _multi_fan_nodes(boundary, node_count):
 
     mesh = trimesh.Trimesh(np.zeros((node_count, 3)), boundary, process=False)
     pairs, shared = mesh.face_adjacency, mesh.face_adjacency_edges
-    rows = np.concatenate([pairs[:, 0] * 3 + np.argmax(boundary[pairs[:, 0]] == shared[:, k, None], axis=1) for k in (0, 1)])
-    cols = np.concatenate([pairs[:, 1] * 3 + np.argmax(boundary[pairs[:, 1]] == shared[:, k, None], axis=1) for k in (0, 1)])
+    def corner(side, end):  # index of the face corner at the shared edge's end vertex
+        return pairs[:, side] * 3 + np.argmax(boundary[pairs[:, side]] == shared[:, end, None], axis=1)
+
+    rows = np.concatenate([corner(0, 0), corner(0, 1)])
+    cols = np.concatenate([corner(1, 0), corner(1, 1)])
     graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(boundary.size, boundary.size))
     _, labels = connected_components(graph, directed=False)
     fan_key = np.unique(boundary.ravel() * boundary.size + labels)

@@ -63,7 +63,8 @@ def _offset_box(offset):
 
 
 @pytest.mark.parametrize("make, fragment", [
-    (lambda: trimesh.Trimesh(_box().vertices, _box().faces[1:], process=False), "3 open edge(s): the surface has holes"),
+    (lambda: trimesh.Trimesh(_box().vertices, _box().faces[1:], process=False),
+     "3 open edge(s): the surface has holes"),
     (lambda: _offset_box([1, 1, 0]), "non-manifold edge(s) shared by more than two faces; first is edge"),
     (lambda: _offset_box([1, 1, 1]), "non-manifold vertex(es) where separate sheets touch; first is vertex"),
     (lambda: _offset_box([0.5, 0.3, 0.2]), "pair(s) of faces cut through each other; first are faces"),
