@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from volspring import Drag, Gravity, Material, Pins, Scene, SpringModel
-from volspring.errors import SimulationDiverged, StepTooLargeWarning
+from volspring.errors import SimulationDiverged, StepTooLarge, StepTooLargeWarning
 from volspring.integrators import make_integrator
 from volspring.simulate import SimulationResult, simulate
 from volspring.stability import critical_step, omega_max_estimate
@@ -186,7 +186,7 @@ def test_no_false_runaway_for_a_damped_falling_body_and_drag():
 def test_guard_stops_before_the_first_step():
     scene, state, dt = blowing_up(1.05)
     calls = []
-    with pytest.raises(StepTooLargeWarning, match="above the critical step"):
+    with pytest.raises(StepTooLarge, match="above the critical step"):
         simulate(scene, "verlet", duration=10 * dt, dt=dt, state=state, guard="raise",
                  callback=lambda *args: calls.append(args))
     assert calls == []  # nothing ran, not even frame 0

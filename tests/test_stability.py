@@ -15,7 +15,7 @@ import volspring.integrators.verlet
 import volspring.simulate
 import volspring.stability
 from volspring import Material, Pins, Scene, SpringModel
-from volspring.errors import StepTooLargeWarning
+from volspring.errors import StepTooLarge, StepTooLargeWarning
 from volspring.stability import (StabilityGuard, critical_step, critical_steps, growth_per_step, omega_max,
                                  omega_max_bound, omega_max_estimate)
 
@@ -131,13 +131,13 @@ def test_guard_warns_raises_or_stays_quiet():
         StabilityGuard(scene, _Unconditional, action="raise").check(1000 * critical)
     with pytest.warns(StepTooLargeWarning, match="above the critical step"):
         StabilityGuard(scene, "verlet").check(1.01 * critical)
-    with pytest.raises(StepTooLargeWarning, match="symplectic_euler"):
+    with pytest.raises(StepTooLarge, match="symplectic_euler"):
         StabilityGuard(scene, "symplectic_euler", action="raise").check(1.01 * critical)
     # Explicit Euler has no stable step; the guard judges the growth over the planned run instead:
     # (1 + z^2)^(steps / 2) with z = 0.01 is 1.0005 over 10 steps, 148 over 100,000.
     euler = StabilityGuard(scene, "explicit_euler", action="raise")
     euler.check(0.01 * critical / 2, steps=10)
-    with pytest.raises(StepTooLargeWarning, match="unstable for undamped oscillation at any step"):
+    with pytest.raises(StepTooLarge, match="unstable for undamped oscillation at any step"):
         euler.check(0.01 * critical / 2, steps=100_000)
     with pytest.raises(ValueError, match="guard action = 'loud'"):
         StabilityGuard(scene, "verlet", action="loud")

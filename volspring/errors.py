@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["SimulationDiverged", "StepTooLargeWarning", "SolverNotConverged"]
+__all__ = ["SimulationDiverged", "StepTooLarge", "StepTooLargeWarning", "SolverNotConverged"]
 
 
 class SimulationDiverged(FloatingPointError):
@@ -18,7 +18,11 @@ class SimulationDiverged(FloatingPointError):
 
 
 class StepTooLargeWarning(RuntimeWarning):
-    """An explicit integrator was asked to step beyond its stability limit."""
+    """An explicit integrator was asked to step beyond its stability limit (``guard="warn"``)."""
+
+
+class StepTooLarge(ValueError):
+    """An explicit integrator was asked to step beyond its stability limit (``guard="raise"``)."""
 
 
 class SolverNotConverged(RuntimeError):

@@ -195,7 +195,7 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
     Raises
     ------
     SimulationDiverged -- NaN/Inf or runaway energy, naming step, time, dt and the worst node
-    StepTooLargeWarning -- with ``guard="raise"``, before any step
+    StepTooLarge -- with ``guard="raise"``, before any step
 
     Examples
     --------

@@ -46,7 +46,7 @@ import weakref
 import numpy as np
 import scipy.sparse as sp
 
-from volspring.errors import StepTooLargeWarning
+from volspring.errors import StepTooLarge, StepTooLargeWarning
 from volspring.model import SpringModel
 from volspring.scene import Scene
 from volspring.springs import spring_stiffness_blocks
@@ -242,7 +242,7 @@ class StabilityGuard:
     scene : Scene
     integrator : Integrator, Integrator subclass or registered name
     action : {"warn", "raise", "off"} -- on a step too large, warn with
-        :class:`~volspring.errors.StepTooLargeWarning`, raise it, or do nothing
+        :class:`~volspring.errors.StepTooLargeWarning`, raise :class:`~volspring.errors.StepTooLarge`, or do nothing
     method : {"estimate", "bound"} -- which omega_max (computed once per scene, cached)
     growth_limit : float -- for schemes unstable at every step (stability_limit 0), the largest
         tolerated growth of the fastest undamped mode's amplitude over the planned steps
@@ -262,7 +262,7 @@ class StabilityGuard:
     >>> guard.check(0.21)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    volspring.errors.StepTooLargeWarning: dt = 0.21 s is above the critical step 0.2 s of symplectic_euler ...
+    volspring.errors.StepTooLarge: dt = 0.21 s is above the critical step 0.2 s of symplectic_euler ...
     """
 
     def __init__(self, scene: Scene, integrator, *, action="warn", method="estimate", growth_limit=2.0):
@@ -312,5 +312,5 @@ class StabilityGuard:
                        f"mode's amplitude would grow by {growth:.4g} over {int(steps)} steps "
                        f"(more than {self.growth_limit:g}); use a smaller dt, damping, or a stable scheme")
         if self.action == "raise":
-            raise StepTooLargeWarning(message)
+            raise StepTooLarge(message)
         warnings.warn(message, StepTooLargeWarning, stacklevel=3)

@@ -18,7 +18,7 @@ class Integrator(ABC):
 
     Subclasses implement :meth:`advance` (the raw scheme on all nodes); :meth:`step` adds what
     every scheme needs: a check of ``dt``, the projection of constraints, obstacles and pins
-    after the step, and divergence detection (no NaN or Inf ever leaves a step).
+    after the step (:meth:`project`), and divergence detection (no NaN or Inf ever leaves a step).
 
     Class attributes
     ----------------
@@ -41,9 +41,17 @@ class Integrator(ABC):
         if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
             raise ValueError(f"dt = {dt!r} s is not a finite number > 0")
         new = self.advance(scene, state, dt)
-        scene.project(new.x, new.v, state.x, new.t, dt)
+        self.project(scene, state, new, dt)
         check_finite(new, dt)
         return new
+
+    def project(self, scene: Scene, start: State, new: State, dt: float) -> None:
+        """Project constraints, obstacles and pins onto the raw step ``new``, in place.
+
+        Schemes that derive velocities from positions (the Verlet family) override this to keep
+        their history consistent with what the projections moved.
+        """
+        scene.project(new.x, new.v, start.x, new.t, dt)
 
 
 def check_finite(state: State, dt: float) -> None:

@@ -39,7 +39,7 @@ import math
 
 import numpy as np
 
-from volspring.integrators.base import Integrator, check_finite
+from volspring.integrators.base import Integrator
 from volspring.scene import Scene, State
 
 __all__ = ["PositionVerlet", "TimeCorrectedVerlet"]
@@ -87,21 +87,17 @@ class _VerletFamily(Integrator):
         v_new = (x_new - x) / dt
         return State(x_new, v_new, t + dt, state.step + 1, {PREVIOUS_X: x, PREVIOUS_DT: float(dt)})
 
-    def step(self, scene: Scene, state: State, dt: float) -> State:
-        """One step as :meth:`Integrator.step`, keeping the history consistent with projections."""
-        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt = {dt!r} s is not a finite number > 0")
-        new = self.advance(scene, state, dt)
-        if scene.constraints or scene.obstacles or scene.pins is not None:
-            x_before, v_before = new.x.copy(), new.v.copy()
-            scene.project(new.x, new.v, state.x, new.t, dt)
-            only_moved = np.any(new.x != x_before, axis=1) & np.all(new.v == v_before, axis=1)
-            if only_moved.any():
-                # Velocity from positions, by the same expression as advance (the next step's
-                # history check then recognises it bit for bit).
-                new.v[only_moved] = (new.x[only_moved] - state.x[only_moved]) / dt
-        check_finite(new, dt)
-        return new
+    def project(self, scene: Scene, start: State, new: State, dt: float) -> None:
+        """Project as :meth:`Integrator.project`, then keep the history consistent with what moved."""
+        if not (scene.constraints or scene.obstacles or scene.pins is not None):
+            return
+        x_before, v_before = new.x.copy(), new.v.copy()
+        scene.project(new.x, new.v, start.x, new.t, dt)
+        only_moved = np.any(new.x != x_before, axis=1) & np.all(new.v == v_before, axis=1)
+        if only_moved.any():
+            # Velocity from positions, by the same expression as advance (the next step's
+            # history check then recognises it bit for bit).
+            new.v[only_moved] = (new.x[only_moved] - start.x[only_moved]) / dt
 
 
 class PositionVerlet(_VerletFamily):
