@@ -272,7 +272,8 @@ def obstacle_contacts(obstacles, positions) -> ObstacleContacts:
     parts = []
     for index, obstacle in enumerate(obstacles):  # a loop over obstacles, not over vertices
         if not isinstance(obstacle, (HalfSpace, StaticTriangleMesh)):
-            raise TypeError(f"obstacles[{index}] must be a HalfSpace or StaticTriangleMesh, got {type(obstacle).__name__}")
+            raise TypeError(f"obstacles[{index}] must be a HalfSpace or StaticTriangleMesh, "
+                            f"got {type(obstacle).__name__}")
         vertex, depth, direction, closest, face = obstacle.contacts(positions)
         parts.append((vertex, np.full(len(vertex), index, dtype=np.int64), depth, direction, closest, face))
     if not parts:

@@ -17,6 +17,10 @@ __all__ = [
 HIT_TOLERANCE = 1e-10
 
 
+# Point-triangle pairs evaluated at once in nearest_surface_points (~100 MB of temporaries).
+_PAIRS_PER_CHUNK = 500_000
+
+
 def _dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
@@ -151,21 +155,26 @@ def nearest_surface_points(points, vertices, faces, *, tree=None):
     todo = np.arange(len(points))
     k = min(8, len(faces))
     while len(todo):
-        centroid_distance, candidate = tree.query(points[todo], k=k)
-        centroid_distance = centroid_distance.reshape(len(todo), k)
-        candidate = candidate.reshape(len(todo), k)
-        flat = candidate.ravel()
-        query = np.repeat(points[todo], k, axis=0)
-        near, bary = closest_points_on_triangles(query, *(corners[flat, i] for i in range(3)))
-        dist = np.linalg.norm(near - query, axis=1).reshape(len(todo), k)
-        best = dist.argmin(axis=1)
-        pick = np.arange(len(todo)) * k + best
-        settled = (k == len(faces)) | (centroid_distance[:, -1] > dist[np.arange(len(todo)), best] + radius)
-        done = todo[settled]
-        face[done] = flat[pick[settled]]
-        closest[done] = near[pick[settled]]
-        barycentric[done] = bary[pick[settled]]
-        distance[done] = dist[np.arange(len(todo)), best][settled]
-        todo = todo[~settled]
+        unsettled = []
+        chunk = max(1, _PAIRS_PER_CHUNK // k)
+        for begin in range(0, len(todo), chunk):  # bounded memory: chunks of points, not one point at a time
+            rows = todo[begin:begin + chunk]
+            centroid_distance, candidate = tree.query(points[rows], k=k)
+            centroid_distance = centroid_distance.reshape(len(rows), k)
+            flat = candidate.reshape(-1)
+            query = np.repeat(points[rows], k, axis=0)
+            near, bary = closest_points_on_triangles(query, *(corners[flat, i] for i in range(3)))
+            dist = np.linalg.norm(near - query, axis=1).reshape(len(rows), k)
+            best = dist.argmin(axis=1)
+            best_distance = dist[np.arange(len(rows)), best]
+            pick = np.arange(len(rows)) * k + best
+            settled = (k == len(faces)) | (centroid_distance[:, -1] > best_distance + radius)
+            done = rows[settled]
+            face[done] = flat[pick[settled]]
+            closest[done] = near[pick[settled]]
+            barycentric[done] = bary[pick[settled]]
+            distance[done] = best_distance[settled]
+            unsettled.append(rows[~settled])
+        todo = np.concatenate(unsettled)
         k = min(4 * k, len(faces))
     return face, closest, barycentric, distance
