@@ -46,22 +46,15 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-# meshio lists several formats for some extensions, and not the expected one first (.msh -> ansys).
-_PREFERRED_FORMATS = {".msh": "gmsh"}
-
-
 def _output_format(path: Path) -> str:
     """The meshio format for the output's extension, checked before any meshing is done."""
-    import meshio
+    from volspring.mesh import mesh_file_format
 
-    suffixes = [s.lower() for s in path.suffixes]
-    for candidate in ("".join(suffixes[-2:]), suffixes[-1] if suffixes else ""):
-        if candidate in _PREFERRED_FORMATS:
-            return _PREFERRED_FORMATS[candidate]
-        if candidate in meshio.extension_to_filetypes:
-            return meshio.extension_to_filetypes[candidate][0]
-    raise ValueError(f"cannot tell the mesh format of output {str(path)!r} from its extension "
-                     f"{path.suffix!r}; use e.g. .vtu, .msh, .xdmf or .mesh")
+    try:
+        return mesh_file_format(path)
+    except ValueError:
+        raise ValueError(f"cannot tell the mesh format of output {str(path)!r} from its extension "
+                         f"{path.suffix!r}; use e.g. .vtu, .msh, .xdmf or .mesh") from None
 
 
 def _read_input(text: str):

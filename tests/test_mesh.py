@@ -100,3 +100,11 @@ def test_unreadable_file_is_a_value_error_not_an_exit(tmp_path, name, content):
     path.write_bytes(content)
     with pytest.raises(ValueError, match=f"cannot read .*{name}"):
         TetMesh.read(path)
+
+
+def test_msh_means_gmsh(tmp_path):
+    import meshio
+
+    path = cube_mesh().write(tmp_path / "cube.msh")
+    # gmsh's own reader accepts what was written: the file is gmsh, not ansys (meshio's first pick).
+    assert len(meshio.read(path, file_format="gmsh").points) == cube_mesh().node_count

@@ -251,7 +251,7 @@ class TetMesh:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"no mesh file at {path}")
-        file_format = _meshio_format(path)
+        file_format = mesh_file_format(path)
         # meshio prints and calls sys.exit(1) when every reader for an extension fails, and
         # lets a reader's own exceptions through on truncated files: turn both into one error.
         try:
@@ -270,21 +270,31 @@ class TetMesh:
         path = Path(path)
         with atomic_path(path) as tmp:
             meshio.write(tmp, self.to_meshio(point_data=point_data, cell_data=cell_data),
-                         file_format=file_format or _meshio_format(path))
+                         file_format=file_format or mesh_file_format(path))
         return path
 
     def __repr__(self) -> str:
         return f"TetMesh({self.node_count} nodes, {self.tet_count} tets, volume {self.volume:.6g})"
 
 
-def _meshio_format(path: Path) -> str:
-    """The meshio format name for a file's extension, or a ValueError naming the known ones."""
+#: meshio lists several formats for some extensions, and not the one users mean first (.msh -> ansys).
+PREFERRED_FORMATS = {".msh": "gmsh"}
+
+
+def mesh_file_format(path) -> str:
+    """The meshio format name for a file's extension, or a ValueError naming the known ones.
+
+    >>> mesh_file_format("beam.msh"), mesh_file_format("beam.vtu")
+    ('gmsh', 'vtu')
+    """
     import meshio
 
-    suffixes = "".join(path.suffixes[-2:]) if len(path.suffixes) > 1 else path.suffix
-    for candidate in (suffixes.lower(), path.suffix.lower()):
-        formats = meshio.extension_to_filetypes.get(candidate)
-        if formats:
-            return formats[0]
+    path = Path(path)
+    suffixes = [suffix.lower() for suffix in path.suffixes]
+    for candidate in ("".join(suffixes[-2:]), suffixes[-1] if suffixes else ""):
+        if candidate in PREFERRED_FORMATS:
+            return PREFERRED_FORMATS[candidate]
+        if candidate in meshio.extension_to_filetypes:
+            return meshio.extension_to_filetypes[candidate][0]
     known = ", ".join(sorted(meshio.extension_to_filetypes))
     raise ValueError(f"unknown mesh file extension {path.suffix!r} for {os.fspath(path)}; known: {known}")
