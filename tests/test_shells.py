@@ -1,13 +1,11 @@
 """Virtual shells: spring counts against the surface's combinatorics, offsets along normals, outward layers."""
 
-import doctest
 import logging
 
 import numpy as np
 import pytest
 from conftest import cube_mesh
 
-import meshing.shells
 from meshing.shells import add_shells
 from volspring import SpringTopology, TetMesh
 
@@ -206,6 +204,3 @@ def test_nearly_folded_shell_is_reported(caplog):
         add_shells(pitted_box(), layers=1, thickness=0.2)
     assert "2 shell triangle(s) shrink below 0.1" in caplog.text
 
-
-def test_docstring_examples_run():
-    assert doctest.testmod(meshing.shells).failed == 0

@@ -1,6 +1,5 @@
 """omega_max estimates, critical steps and the step guard."""
 
-import doctest
 import math
 import warnings
 
@@ -141,11 +140,3 @@ def test_guard_warns_raises_or_stays_quiet():
         euler.check(0.01 * critical / 2, steps=100_000)
     with pytest.raises(ValueError, match="guard action = 'loud'"):
         StabilityGuard(scene, "verlet", action="loud")
-
-
-@pytest.mark.parametrize("module", [volspring.stability, volspring.diagnostics, volspring.simulate,
-                                    volspring.integrators, volspring.integrators.explicit,
-                                    volspring.integrators.verlet])
-def test_docstring_examples_run(module):
-    result = doctest.testmod(module, optionflags=doctest.ELLIPSIS)
-    assert result.attempted > 0 and result.failed == 0
