@@ -31,6 +31,7 @@ _CLEARANCE = 0.5  # lattice points closer than this to the surface are dropped (
 _BAND = 0.5  # band points sit this far outside the surface, along the vertex normals
 _SLIVER_RADIUS_RATIO = 0.05  # boundary tets below this radius ratio are peeled off
 _REPAIR_ROUNDS = 8
+_SMOOTH_COSINE = np.cos(np.radians(30.0))  # a vertex whose faces all lie within 30 deg of its normal is smooth
 
 
 def estimated_tet_count(volume: float, size: float) -> float:
@@ -276,13 +277,17 @@ def _slid_along_surface(surface, movable, rng):
     direction[crease] = line * rng.choice([-1.0, 1.0], size=(len(line), 1))
     # Curved vertices (movable ones only: built-in shapes) slide in their tangent plane, which breaks the
     # mirror symmetries of icospheres and tori; they leave the exact surface by (step)^2 / (2 rho) at most.
+    # A sharp vertex (a box corner: three planes) is not curved: it stays where it is.
     curved = ~flat & ~crease
+    spread = np.einsum("nkj,nj->nk", normals, surface.vertex_normals)
+    smooth = (np.isnan(spread) | (spread > _SMOOTH_COSINE)).all(axis=1)
     normal = surface.vertex_normals[curved]
     direction[curved] -= np.einsum("nj,nj->n", direction[curved], normal)[:, None] * normal
     direction /= np.linalg.norm(direction, axis=1)[:, None]
     shortest = np.full(len(first), np.inf)
     np.minimum.at(shortest, surface.edges_unique.ravel(), np.repeat(surface.edges_unique_length, 2))
-    step = np.where(movable, np.where(curved, 0.05, 0.1) * shortest * rng.uniform(0.2, 1.0, len(first)), 0.0)
+    step = np.where(movable & (smooth | ~curved),
+                    np.where(curved, 0.05, 0.1) * shortest * rng.uniform(0.2, 1.0, len(first)), 0.0)
     vertices = surface.vertices + step[:, None] * direction
     # Keep no move that turns a face over (cannot happen at 0.1 x the shortest edge on sane grids; checked anyway).
     turned = np.einsum("ij,ij->i", trimesh.triangles.normals(vertices[surface.faces])[0], surface.face_normals) < 0.5
