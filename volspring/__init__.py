@@ -6,7 +6,9 @@ from volspring.fields import CallableForce, PointAttractor, PointRepulser, Vorte
 from volspring.material import Material
 from volspring.mesh import TetMesh
 from volspring.model import FORCE_LAWS, STIFFNESS_RULES, SpringModel
+from volspring.errors import SimulationDiverged, SolverNotConverged, StepTooLarge, StepTooLargeWarning
 from volspring.scene import Drag, Gravity, Pins, Scene, State
+from volspring.simulate import SimulationResult, simulate
 from volspring.topology import SPRING_KINDS, SpringTopology
 
 __version__ = "0.1.0"
@@ -26,6 +28,11 @@ __all__ = [
     "Material",
     "Pins",
     "SPRING_KINDS",
+    "SimulationDiverged",
+    "SimulationResult",
+    "SolverNotConverged",
+    "StepTooLarge",
+    "StepTooLargeWarning",
     "STIFFNESS_RULES",
     "Scene",
     "SpringModel",
@@ -34,4 +41,5 @@ __all__ = [
     "TetMesh",
     "load_checkpoint",
     "save_checkpoint",
+    "simulate",
 ]
