@@ -242,6 +242,14 @@ class AMGConjugateGradient(_LinearSolver):
     smoother : {"gauss_seidel", "jacobi"} -- block Gauss-Seidel (forward before, backward after
         the coarse correction, so the V-cycle stays symmetric) or block Jacobi
     max_coarse : int -- unknowns on the coarsest level (solved with a pseudo-inverse)
+    strength_theta : float -- couplings weaker than theta (symmetric strength measure) are
+        dropped when aggregating; 0.05 cut CG iterations from 7 to 5 (rtol 1e-3) and 13 to 10
+        (rtol 1e-6) on a 50k-node beam at h omega_max = 50; a hierarchy with operator complexity
+        above 2.5 is rebuilt with theta = 0
+
+    The candidates B are used as given (``improve_candidates=None``): rigid-body modes are
+    already the near-null space, and relaxing them first doubled the setup time for the same
+    iteration counts (measured on 10k and 50k-node beams).
 
     The hierarchy is built from an explicit :meth:`build` call (or the first solve) and kept;
     it is a frozen copy, so later refills of the matrix do not disturb it.
@@ -250,11 +258,12 @@ class AMGConjugateGradient(_LinearSolver):
     method = "amg"
 
     def __init__(self, *, rtol=1e-3, maxiter=500, on_failure="raise", smoother="gauss_seidel",
-                 max_coarse=300):
+                 max_coarse=300, strength_theta=0.05):
         super().__init__(rtol=rtol, maxiter=maxiter, on_failure=on_failure)
         if smoother not in ("gauss_seidel", "jacobi"):
             raise ValueError(f"smoother = {smoother!r}, expected 'gauss_seidel' or 'jacobi'")
         self.smoother, self.max_coarse = smoother, int(max_coarse)
+        self.strength_theta = float(strength_theta)
         self.hierarchy = None
         self.build_count = 0
 
@@ -275,9 +284,13 @@ class AMGConjugateGradient(_LinearSolver):
         else:
             pre = post = ("block_jacobi", {"omega": 2.0 / 3.0, "iterations": 1})
         frozen = matrix.copy()
+        options = dict(B=np.ascontiguousarray(near_null_space), symmetry="hermitian", presmoother=pre,
+                       postsmoother=post, max_coarse=self.max_coarse, improve_candidates=None)
         self.hierarchy = pyamg.smoothed_aggregation_solver(
-            frozen, B=np.ascontiguousarray(near_null_space), symmetry="hermitian", strength="symmetric",
-            presmoother=pre, postsmoother=post, max_coarse=self.max_coarse)
+            frozen, strength=("symmetric", {"theta": self.strength_theta}), **options)
+        if self.strength_theta and self.hierarchy.operator_complexity() > 2.5:
+            # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
+            self.hierarchy = pyamg.smoothed_aggregation_solver(frozen, strength="symmetric", **options)
         self.precondition(np.zeros(matrix.shape[0]))  # the coarse solver sets up lazily: count it here
         self.build_count += 1
         seconds = clock() - start
