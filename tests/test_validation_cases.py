@@ -1,0 +1,173 @@
+"""The validation cases, the spring/FEM comparison and the studies' measuring tools."""
+
+import numpy as np
+import pytest
+
+from validation.beams import box_mesh
+from validation.cases import (CASE_NAMES, build_case, check_held, hanging_bar, own_mesh_case, parse_region,
+                              uniaxial_compression)
+from validation.compare import (RULES, compare_static, effective_constants, rest_stiffness_matrix,
+                                spring_frequencies, spring_model, spring_static, traction_forces, uniform_stiffness)
+from validation.fem import Box, Traction
+from validation.studies import fit_rate, pareto_front, speed_study
+from volspring import Material, SpringModel
+
+
+@pytest.fixture
+def cache_folder(tmp_path):
+    return tmp_path / "fem-cache"
+
+
+def test_box_mesh_counts_and_volume():
+    mesh = box_mesh((4, 3, 2), (2.0, 1.5, 1.0))
+    assert mesh.node_count == 5 * 4 * 3
+    assert mesh.tet_count == 6 * 4 * 3 * 2
+    assert mesh.volume == pytest.approx(3.0, rel=1e-12)  # exact up to round-off
+    assert box_mesh((4, 3, 2), (2.0, 1.5, 1.0), pattern="kuhn").node_count == mesh.node_count
+    with pytest.raises(ValueError, match="pattern"):
+        box_mesh((1, 1, 1), (1, 1, 1), pattern="diagonal")
+
+
+@pytest.mark.parametrize("name", [n for n in CASE_NAMES if n != "own_mesh"])
+def test_cases_stay_small_deformation(name, cache_folder):
+    case = build_case(name, quick=True)
+    if case.kind == "modes":
+        assert case.analytic["first_frequency_hz"] == pytest.approx(8.848, rel=1e-3)  # Euler-Bernoulli, by hand
+        return
+    result = compare_static(case, rules=("van_gelder",), elements=("P2",), folder=cache_folder).results
+    size = float(np.ptp(case.mesh.points, axis=0).max())
+    # The cases are set to about 0.5% of the length; 1% is the small-deformation bound the issue asks for.
+    # The compressed cube moves by its 1% strain plus the lateral bulge: sqrt(1 + 2 (0.3)^2) = 1.09%.
+    bound = 0.011 if name == "uniaxial_compression" else 0.01
+    assert result["fem"]["P2"]["max_displacement_m"] <= bound * size
+    assert "warning" not in result
+
+
+def test_mirrored_mesh_removes_the_sideways_sway_of_springs():
+    """On the plain Kuhn grid every cell's springs lean the same way: a hanging bar sways sideways."""
+    sway = {}
+    for pattern in ("mirrored", "kuhn"):
+        case = hanging_bar(per_width=2)
+        mesh = box_mesh(case.cells, (0.1, 0.1, 1.0), pattern=pattern)
+        case = type(case)(**{**case.__dict__, "mesh": mesh, "tip_nodes": Box.plane("z", 0.0)(mesh.points)})
+        u = spring_static(case, spring_model(mesh, case.material, "van_gelder")).displacement[case.tip_nodes]
+        sway[pattern] = np.abs(u[:, :2].mean(axis=0)).max() / abs(u[:, 2].mean())
+    assert sway["mirrored"] < 1e-8   # symmetric mesh: zero up to round-off
+    assert sway["kuhn"] > 0.1        # measured 0.47: a large, systematic artefact
+
+
+def test_newton_and_linearised_spring_solves_agree_at_small_deformation():
+    case = build_case("cantilever_gravity", quick=True)
+    model = spring_model(case.mesh, case.material, "lloyd")
+    newton = spring_static(case, model, method="newton").displacement
+    linear = spring_static(case, model, method="linear").displacement
+    # Geometric nonlinearity at 0.5% deflection is O(rotation^2) ~ 1e-4 relative; 1e-2 leaves room.
+    assert np.abs(newton - linear).max() < 1e-2 * np.abs(linear).max()
+
+
+def test_rest_stiffness_has_the_rigid_motions_as_null_space():
+    mesh = box_mesh((2, 2, 2), (1.0, 1.0, 1.0))
+    K = rest_stiffness_matrix(spring_model(mesh, Material(1e6, 0.3, 1000.0), "van_gelder"))
+    x = mesh.points - mesh.points.mean(axis=0)
+    motions = [np.tile(np.eye(3)[c], (mesh.node_count, 1)) for c in range(3)]
+    motions += [np.cross(np.eye(3)[c], x) for c in range(3)]
+    scale = abs(K).max()
+    for motion in motions:
+        assert np.abs(K @ motion.ravel()).max() < 1e-10 * scale  # round-off of sums of k r r^T terms
+    assert (np.linalg.eigvalsh(K.toarray()) > -1e-8 * scale).all()  # positive semi-definite
+
+
+def test_traction_forces_total_the_load():
+    mesh = box_mesh((3, 2, 2), (1.0, 0.2, 0.1))
+    forces = traction_forces(mesh, [Traction(Box.plane("x", 1.0), (0.0, 0.0, -500.0))])
+    np.testing.assert_allclose(forces.sum(axis=0), [0.0, 0.0, -500.0 * 0.2 * 0.1], rtol=1e-12)
+    assert np.count_nonzero(np.abs(forces).sum(axis=1)) == 3 * 3  # only the 9 nodes of the face x = 1
+
+
+def test_spring_frequency_of_one_spring():
+    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [1.0, 2.0, 1.0, 1.0],
+                                    [[0, 1], [0, 2], [0, 3]], stiffness=50.0)
+    held = np.array([True, False, True, True])
+    # Node 1 (mass 2) on one spring along x: f = sqrt(k / m) / 2 pi; its other directions have no stiffness.
+    frequencies, shapes = spring_frequencies(model, held, count=3)
+    assert frequencies[-1] == pytest.approx(np.sqrt(50.0 / 2.0) / (2 * np.pi), rel=1e-10)
+    assert np.abs(shapes[-1][held]).max() == 0.0
+
+
+@pytest.mark.parametrize("rule", RULES)
+def test_cauchy_limit_one_effective_nu_whatever_is_asked(rule):
+    mesh = box_mesh((3, 3, 3), (1.0, 1.0, 1.0))
+    measured = {nu: effective_constants(mesh, spring_model(mesh, Material(1e6, nu, 1000.0), rule))
+                for nu in (0.3, 0.45)}
+    # The rules use E only: the same network, the same nu, to round-off.
+    assert measured[0.3]["nu"] == pytest.approx(measured[0.45]["nu"], abs=1e-12)
+    # ... and not what was asked: the network's own nu lies in 0.08-0.25 (REFERENCE.md section 2).
+    assert 0.05 < measured[0.45]["nu"] < 0.26
+    assert abs(measured[0.45]["nu"] - 0.45) > 0.15
+    # Volume strain per strain follows the network's nu, not 1 - 2 x 0.45 = 0.1: several times too much.
+    assert measured[0.45]["volume_strain_per_axial_strain"] > 4 * (1 - 2 * 0.45)
+
+
+def test_uniform_rule_uses_the_mean_van_gelder_constant():
+    mesh = box_mesh((2, 1, 1), (1.0, 0.5, 0.5))
+    material = Material(1e6, 0.3, 1000.0)
+    model = spring_model(mesh, material, "uniform")
+    assert np.allclose(model.stiffness, uniform_stiffness(mesh, material))
+    assert uniform_stiffness(mesh, material) == pytest.approx(
+        SpringModel.from_mesh(mesh, material, rule="van_gelder").stiffness.mean())
+
+
+def test_compression_uses_the_linear_solve_and_fem_matches_the_closed_form(cache_folder):
+    case = uniaxial_compression(cells=2, nu=0.45)
+    result = compare_static(case, rules=("lloyd",), elements=("P1",), folder=cache_folder).results
+    assert result["springs"]["lloyd"]["solver"] == "linear"
+    # Uniform strain: P1 is exact, the linearised volume change is (1 - 2 nu) eps V and the moved mesh's
+    # volume (1 + eps)(1 - nu eps)^2 V - V; 1e-9 is round-off of the sparse solve.
+    exact, eps = case.analytic["volume_change_m3"], -0.01
+    assert result["fem"]["P1"]["volume_change_m3"] == pytest.approx(exact, rel=1e-9)
+    moved = (1 + eps) * (1 - 0.45 * eps) ** 2 - 1
+    assert result["fem"]["P1"]["deformed_volume_change_m3"] == pytest.approx(moved, rel=1e-9)
+    assert abs(result["springs"]["lloyd"]["volume_change_error_vs_analytic"]) > 1.0  # springs lose far more
+
+
+def test_parse_region_forms():
+    mesh = box_mesh((2, 2, 2), (2.0, 1.0, 1.0))
+    assert parse_region("xmax", mesh)(mesh.points).sum() == 9
+    assert parse_region("x < 0.5", mesh)(mesh.points).sum() == 9
+    assert parse_region("z>0.9", mesh)(mesh.points).sum() == 9
+    assert parse_region("box:-1,-1,-1,0,1,1", mesh)(mesh.points).sum() == 9
+    for bad in ("left", "x<abc", "box:1,2,3"):
+        with pytest.raises(ValueError, match="region"):
+            parse_region(bad, mesh)
+
+
+def test_own_mesh_errors():
+    mesh = box_mesh((4, 1, 1), (1.0, 0.25, 0.25))
+    material = Material(1e6, 0.3, 1000.0)
+    with pytest.raises(ValueError, match="contains no mesh node"):
+        own_mesh_case(mesh, parse_region("x<-1", mesh), material=material)
+    with pytest.raises(ValueError, match="one line"):  # an edge of the box: rotation about it is free
+        check_held(mesh, (mesh.points[:, 0] == 0) & (mesh.points[:, 1] == 0))
+    with pytest.raises(ValueError, match="nu = 0.5"):
+        Material(1e6, 0.5, 1000.0)
+    case = own_mesh_case(mesh, parse_region("xmin", mesh), material=material)
+    assert case.kind == "static" and case.tip_nodes is None
+
+
+def test_fit_rate_and_pareto_front():
+    n = np.array([10.0, 80.0, 640.0])
+    assert fit_rate(n, 3.0 * n**-0.5) == pytest.approx(-0.5, rel=1e-12)
+    assert fit_rate([10.0], [1.0]) is None
+    assert pareto_front([1.0, 2.0, 3.0, 0.5], [0.1, 0.2, 0.01, np.nan]) == [0, 2]
+
+
+def test_speed_study_flags_unstable_steps_and_measures_the_frequency(cache_folder):
+    study = speed_study(per_height=1, steps={"symplectic_euler": (0.9, 1.1)}, duration=0.3, drag_rate=30.0,
+                        folder=cache_folder)
+    stable, unstable = study["runs"]
+    assert stable["stable"] and not unstable["stable"]
+    # Below the critical step symplectic Euler's frequency error is (h omega_1)^2-small; the fit of the
+    # damped modal trajectory is good to about 0.2% (measured 0.1%).
+    assert abs(stable["first_frequency_error"]) < 5e-3
+    # exp(-c T / 2) = exp(-4.5) of the initial amplitude is left at the end: 1% of the deflection.
+    assert abs(stable["settled_deflection_error"]) < 2e-2
