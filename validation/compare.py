@@ -375,6 +375,10 @@ def compare_static(case: Case, *, rules=RULES, elements=("P2", "P1"), folder=Non
         fem[element]["tip_deflection_m"] = tip_deflection(case, displacements[f"fem_{element}"], **measure)
     reference_tip = fem[elements[0]]["tip_deflection_m"]
     reference_volume = fem[elements[0]]["deformed_volume_change_m3"]
+    if abs(fem[elements[0]]["volume_change_m3"]) < 1e-3 * abs(reference_volume):
+        # Bending: the linearised volume change is zero and the moved mesh's is the O(rotation^2) growth of a
+        # linear field, not a property of the material: no meaningful relative error.
+        reference_volume = None
     analytic_volume = case.analytic.get("volume_change_m3")
     for element in elements[1:]:
         fem[element].update(tip_deflection_error=_relative(fem[element]["tip_deflection_m"], reference_tip),
