@@ -34,11 +34,11 @@ def omega_max(model, free=None) -> float:
     pattern = BlockPattern(model, free)
     stiffness = pattern.matrix(linearize_springs(pattern, model.rest_positions, stiffness_scale=1.0).blocks)
     scale = sp.diags(np.repeat(model.masses[pattern.free_nodes], 3) ** -0.5)
-    scaled = (scale @ stiffness.tocsr() @ scale).toarray()
-    if len(scaled) <= 1500:
-        return float(np.sqrt(scipy.linalg.eigvalsh(scaled)[-1]))
+    scaled = (scale @ stiffness.tocsr() @ scale).tocsr()
+    if scaled.shape[0] <= 1500:
+        return float(np.sqrt(scipy.linalg.eigvalsh(scaled.toarray())[-1]))
     # Lanczos to 1e-8: far tighter than any use here (step sizes are set to a few digits).
-    return float(np.sqrt(sla.eigsh(sp.csr_matrix(scaled), k=1, which="LA", tol=1e-8, return_eigenvectors=False)[0]))
+    return float(np.sqrt(sla.eigsh(scaled, k=1, which="LA", tol=1e-8, return_eigenvectors=False)[0]))
 
 
 def total_energy(scene, state):
@@ -92,7 +92,7 @@ def dense_reference_step(scene, state, h):
     v1[nodes] = (scene.pins.positions(model.rest_positions, t + h) - x[nodes]) / h
     dv_fixed = np.zeros(3 * n)
     dv_fixed.reshape(-1, 3)[nodes] = v1[nodes] - v[nodes]
-    free = (3 * np.flatnonzero(scene.free)[:, None] + np.arange(3)).ravel()
+    free = BlockPattern(model, scene.free).free_dofs()  # the solver's unknown order (RCM)
     b = b - A @ dv_fixed
     dv = np.linalg.solve(A[np.ix_(free, free)], b[free])
     v1.reshape(-1)[free] += dv

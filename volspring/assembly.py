@@ -17,7 +17,8 @@ Pinned (and prescribed) nodes are eliminated: the pattern spans the free nodes o
 right-hand side (:meth:`BlockPattern.boundary_coupling`).
 
 Free unknowns are ordered node-major: unknown ``3 k + c`` is component c of free node
-``free_nodes[k]``, so ``vector.reshape(-1, 3)`` gives per-node rows.
+``free_nodes[k]``, so ``vector.reshape(-1, 3)`` gives per-node rows. The free nodes are
+numbered by reverse Cuthill-McKee by default (cache locality), not by node index.
 """
 
 from __future__ import annotations
@@ -38,10 +39,12 @@ class BlockPattern:
     ----------
     model : SpringModel
     free : (n,) bool, optional -- nodes that are unknowns; all nodes when omitted
+    ordering : {"rcm", "natural"} -- numbering of the free nodes: reverse Cuthill-McKee on the
+        spring graph (for cache locality, see :meth:`_reorder`) or increasing node index
 
     Attributes
     ----------
-    free_nodes : (f,) int -- model node index of each free node
+    free_nodes : (f,) int -- model node index of each free node, in unknown order
     node_index : (n,) int -- free index of each model node, -1 for fixed nodes
     size : int -- number of unknowns, 3 f
     boundary_springs : (b,) int -- springs with exactly one free end
@@ -53,24 +56,29 @@ class BlockPattern:
     >>> from volspring.assembly import BlockPattern
     >>> chain = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [1.0, 1.0, 1.0],
     ...                                 [[0, 1], [1, 2]], stiffness=10.0)
-    >>> pattern = BlockPattern(chain, free=np.array([False, True, True]))
+    >>> pattern = BlockPattern(chain, free=np.array([False, True, True]), ordering="natural")
     >>> blocks = np.broadcast_to(np.eye(3), (2, 3, 3))
     >>> pattern.matrix(blocks, chain.masses[pattern.free_nodes]).toarray()[0, :4]
     array([ 3.,  0.,  0., -1.])
     """
 
-    def __init__(self, model, free=None):
+    def __init__(self, model, free=None, *, ordering="rcm"):
         n = model.node_count
         free = np.ones(n, dtype=bool) if free is None else np.asarray(free, dtype=bool)
         if free.shape != (n,):
             raise ValueError(f"free must have shape ({n},), got {free.shape}")
+        if ordering not in ("rcm", "natural"):
+            raise ValueError(f"ordering = {ordering!r}, expected 'rcm' or 'natural'")
         self.model = model
         self.free = free.copy()
+        self.ordering = ordering
         self.free_nodes = np.flatnonzero(free)
         self.node_index = np.full(n, -1, dtype=np.int64)
         self.node_index[self.free_nodes] = np.arange(len(self.free_nodes))
         f = len(self.free_nodes)
         self.size = 3 * f
+        if ordering == "rcm" and f > 1:
+            self._reorder()
 
         a, b = self.node_index[model.springs.T]
         s = model.spring_count
@@ -101,6 +109,24 @@ class BlockPattern:
         self.diagonal_entries = (9 * self.diagonal_blocks[:, None] + np.array([0, 4, 8])).ravel()
         # (s, n) sparse: difference @ x = x_j - x_i for every spring (a sparse product beats fancy indexing).
         self.difference = (-model.incidence.T).tocsr()
+
+    def _reorder(self):
+        """Number the free nodes by reverse Cuthill-McKee on the spring graph.
+
+        Mesh generators number nodes with little locality (a 50k-node gmsh beam: bandwidth
+        48455); RCM brings it to about a thousand, which made the BSR mat-vec and the block
+        Gauss-Seidel sweeps 1.5-2.5x faster (cache reuse of the vector entries).
+        """
+        from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+        f = len(self.free_nodes)
+        a, b = self.node_index[self.model.springs.T]
+        both = (a >= 0) & (b >= 0)
+        graph = sp.csr_matrix((np.ones(2 * both.sum()), (np.concatenate([a[both], b[both]]),
+                                                         np.concatenate([b[both], a[both]]))), shape=(f, f))
+        order = reverse_cuthill_mckee(graph, symmetric_mode=True)
+        self.free_nodes = self.free_nodes[order]
+        self.node_index[self.free_nodes] = np.arange(f)
 
     @property
     def free_count(self) -> int:

@@ -322,6 +322,7 @@ class ImplicitEuler(Integrator):
                 solves.append(info)
                 v1[pattern.free_nodes] += delta.reshape(-1, 3)
                 x1 = x0 + h * v1
+            dv = pattern.restrict(v1 - v0)  # warm start the next step from the converged change
 
         first = solves[0]
         if rebuilt or _KEY + "amg_iterations" not in memory:
