@@ -45,6 +45,10 @@ class BlockPattern:
     Attributes
     ----------
     free_nodes : (f,) int -- model node index of each free node, in unknown order
+    node_order : (n,) int -- model node of each local node: the free nodes, then the fixed ones
+    node_rank : (n,) int -- local index of each model node (inverse of ``node_order``)
+    spring_order : (s,) int -- model spring of each local spring (sorted by first free end)
+    springs : (s, 2) int -- local node indices of each local spring
     node_index : (n,) int -- free index of each model node, -1 for fixed nodes
     size : int -- number of unknowns, 3 f
     boundary_springs : (b,) int -- springs with exactly one free end
@@ -80,9 +84,29 @@ class BlockPattern:
         if ordering == "rcm" and f > 1:
             self._reorder()
 
-        a, b = self.node_index[model.springs.T]
+        # Local numbering: free nodes first (in unknown order), then the fixed ones; springs
+        # sorted by their first free end, so that every per-spring pass and the scatter into the
+        # block rows walk memory nearly in order.
+        fixed = np.flatnonzero(~free)
+        self.node_order = np.concatenate([self.free_nodes, fixed])
+        self.node_rank = np.empty(n, dtype=np.int64)
+        self.node_rank[self.node_order] = np.arange(n)
+        local = self.node_rank[model.springs]
+        self.spring_order = np.argsort(local.min(axis=1), kind="stable")
+        springs = local[self.spring_order]
+        self.springs = springs
+        self.stiffness = model.stiffness[self.spring_order]
+        self.damping = model.damping[self.spring_order]
+        self.rest_lengths = model.rest_lengths[self.spring_order]
         s = model.spring_count
         spring_ids = np.arange(s)
+        # (n, s) sparse: +1 at (i, e), -1 at (j, e) in local numbering; difference = -incidence^T
+        # gives x_j - x_i per spring (a sparse product beats fancy indexing).
+        self.incidence = sp.csr_matrix((np.concatenate([np.ones(s), -np.ones(s)]),
+                                        (springs.T.ravel(), np.tile(spring_ids, 2))), shape=(n, s))
+        self.difference = (-self.incidence.T).tocsr()
+
+        a, b = (np.where(springs < f, springs, -1)).T
         both = (a >= 0) & (b >= 0)
         self.boundary_springs = np.flatnonzero((a >= 0) != (b >= 0))
         # (row, col, spring, sign) of every block contribution of every spring.
@@ -107,8 +131,6 @@ class BlockPattern:
         self.summation.sum_duplicates()
         # Flat positions of the diagonal entries of the diagonal blocks in the data array.
         self.diagonal_entries = (9 * self.diagonal_blocks[:, None] + np.array([0, 4, 8])).ravel()
-        # (s, n) sparse: difference @ x = x_j - x_i for every spring (a sparse product beats fancy indexing).
-        self.difference = (-model.incidence.T).tocsr()
 
     def _reorder(self):
         """Number the free nodes by reverse Cuthill-McKee on the spring graph.
@@ -137,7 +159,8 @@ class BlockPattern:
 
         Parameters
         ----------
-        spring_blocks : (s, 3, 3) float -- W_e of every spring (all springs of the model)
+        spring_blocks : (s, 3, 3) float -- W_e of every spring, in the pattern's spring order
+            (``spring_order[k]`` is the model spring of row k; as :func:`linearize_springs` gives them)
         diagonal : (f,) or (f, 3) or (f, 3, 3) float, optional -- added to the diagonal block of
             each free node: a scalar times I (e.g. the masses), a diagonal, or a full block
         out : (nnzb, 3, 3) float, optional -- written in place
@@ -179,27 +202,31 @@ class BlockPattern:
 
         Parameters
         ----------
-        spring_blocks : (s, 3, 3) float -- W_e of every spring
+        spring_blocks : (s, 3, 3) float -- W_e of every spring, in the pattern's spring order
         prescribed : (n, 3) float -- values on the fixed nodes (rows of free nodes are ignored)
 
         Only the free nodes' rows of the result are meaningful.
         """
-        model = self.model
-        out = np.zeros((model.node_count, 3))
+        n, f = self.model.node_count, self.free_count
+        out = np.zeros((n, 3))
         e = self.boundary_springs
         if e.size == 0:
             return out
-        i, j = model.springs[e].T
-        u = np.where(self.free[:, None], 0.0, prescribed)
+        i, j = self.springs[e].T
+        u = prescribed[self.node_order]
+        u[:f] = 0.0
         coupling = np.einsum("eab,eb->ea", spring_blocks[e], u[j] - u[i])
         np.add.at(out, i, coupling)
         np.add.at(out, j, -coupling)
-        return out
+        return out[self.node_rank]
 
 
 @dataclass(frozen=True, eq=False)
 class SpringLinearization:
     """The springs' forces and Jacobian blocks at one configuration (from :func:`linearize_springs`).
+
+    Per-spring arrays are in the pattern's spring order (``pattern.spring_order[k]`` is the
+    model spring of row k); the forces are per model node.
 
     Parameters
     ----------
@@ -223,10 +250,11 @@ class SpringLinearization:
 def linearize_springs(pattern, x, v=None, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
     """Spring forces and the blocks c_K H_e + c_D D_e in one pass over the springs.
 
-    The blocks equal ``stiffness_scale * spring_stiffness_blocks(model, x) + damping_scale *
-    damper_blocks(model, x)`` and the forces ``spring_forces(model, x, v)``, but the directions
-    are computed once (with the pattern's sparse difference operator, much faster than fancy
-    indexing) and each block is written once from the scalar coefficients of r r^T and I.
+    The blocks equal ``(stiffness_scale * spring_stiffness_blocks(model, x) + damping_scale *
+    damper_blocks(model, x))[pattern.spring_order]`` and the forces ``spring_forces(model, x, v)``,
+    but the directions are computed once (with the pattern's sparse difference operator, much
+    faster than fancy indexing, in the pattern's local numbering for memory locality) and each
+    block is written once from the scalar coefficients of r r^T and I.
 
     Parameters
     ----------
@@ -241,28 +269,29 @@ def linearize_springs(pattern, x, v=None, *, stiffness_scale, damping_scale=0.0,
     -------
     SpringLinearization
     """
-    model = pattern.model
-    d = pattern.difference @ x
+    p = pattern
+    d = p.difference @ x[p.node_order]
     length = np.sqrt(np.einsum("ij,ij->i", d, d))
     if length.size and not length.min() > 0.0:
         e = int(np.argmin(length))
-        raise FloatingPointError(f"spring {e} between nodes {model.springs[e, 0]} and {model.springs[e, 1]} "
-                                 f"has length {length[e]}, expected > 0")
+        i, j = p.model.springs[p.spring_order[e]]
+        raise FloatingPointError(f"spring {p.spring_order[e]} between nodes {i} and {j} has length {length[e]}, "
+                                 "expected > 0")
     r = d / length[:, None]
-    magnitude = model.stiffness * (length - model.rest_lengths)
-    if v is not None and model.damping.any():
-        magnitude += model.damping * np.einsum("ij,ij->i", pattern.difference @ v, r)
-    forces = model.incidence @ (magnitude[:, None] * r)
-    transverse = 1.0 - model.rest_lengths / length
+    magnitude = p.stiffness * (length - p.rest_lengths)
+    if v is not None and p.damping.any():
+        magnitude += p.damping * np.einsum("ij,ij->i", p.difference @ v[p.node_order], r)
+    forces = (p.incidence @ (magnitude[:, None] * r))[p.node_rank]
+    transverse = 1.0 - p.rest_lengths / length
     if clamp_compression:
         np.maximum(transverse, 0.0, out=transverse)
-    transverse *= model.stiffness
-    along = stiffness_scale * (model.stiffness - transverse)
+    transverse *= p.stiffness
+    along = stiffness_scale * (p.stiffness - transverse)
     if damping_scale:
-        along += damping_scale * model.damping
+        along += damping_scale * p.damping
     blocks = r[:, :, None] * (along[:, None] * r)[:, None, :]
     blocks.reshape(-1, 9)[:, ::4] += (stiffness_scale * transverse)[:, None]
-    return SpringLinearization(blocks, r, length, model.stiffness, transverse, forces)
+    return SpringLinearization(blocks, r, length, p.stiffness, transverse, forces)
 
 
 def stiffness_times(pattern, linearization, u) -> np.ndarray:
@@ -272,10 +301,10 @@ def stiffness_times(pattern, linearization, u) -> np.ndarray:
     to node i and subtracted from node j.
     """
     lin = linearization
-    du = pattern.difference @ u
+    du = pattern.difference @ u[pattern.node_order]
     along = (lin.axial - lin.transverse) * np.einsum("ij,ij->i", lin.directions, du)
     per_spring = along[:, None] * lin.directions + lin.transverse[:, None] * du
-    return pattern.model.incidence @ per_spring
+    return (pattern.incidence @ per_spring)[pattern.node_rank]
 
 
 def rigid_body_modes(points) -> np.ndarray:
