@@ -1,0 +1,89 @@
+"""Time the contact response per step at about 1k, 10k and 50k tets: detection, depths, forces, Jacobian.
+
+The scene of ``bench_collision.py`` (two Kuhn-split unit boxes, the second tilted and pushed a third of
+its width into the first), assembled into one spring model with :func:`assemble_bodies`. For each size
+the script prints the colliding points (contacts), then, per step:
+
+- ``detect``: vertex-in-tet detection by spatial hashing (Teschner et al. 2003);
+- ``depth``: consistent penetration depths (Heidelberger et al. 2004);
+- ``force``: ``ContactForce.accumulate`` as a scene calls it once per step or stage, i.e. detection,
+  depths, penalty, damping and friction scattered onto the nodes (it includes the two above);
+- ``jacobian``: ``ContactForce.jacobian`` at the same positions (contacts cached): the 5-node blocks
+  assembled into a (3N, 3N) CSR matrix, what implicit Euler adds per step;
+- ``SpMV``: one product with the 3N x 3N spring-stiffness pattern of the same N nodes, measured in the
+  same run as this machine's yardstick, and the step (force + jacobian) in units of it.
+
+Published figures to compare with (Pentium 4 1.8 GHz, 2003): detection 4.3 / 30.4 / 70 / 172.5 ms at
+1k / 10k / 20k / 50k tets; depths ~35 us per colliding point (2004).
+
+Run: ``OMP_NUM_THREADS=1 python benchmarks/bench_contact.py`` (``--sizes 1000 20000`` to choose).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_collision import PUBLISHED_DETECTION_MS, best_time, box_mesh, spmv_time  # noqa: E402
+
+from volspring import Material  # noqa: E402
+from volspring.collision import consistent_penetration_depths, detect_collisions  # noqa: E402
+from volspring.collision.contact import ContactForce  # noqa: E402
+from volspring.collision.multibody import Body, assemble_bodies  # noqa: E402
+
+
+def contact_scene(total_tets):
+    """The boxes of ``bench_collision.scene`` as two bodies of one model, with a frictional ContactForce."""
+    n = max(2, round((total_tets / 12) ** (1 / 3)))
+    mesh = box_mesh((n, n, n), (1.0, 1.0, 1.0))
+    tilt = Rotation.from_rotvec([0.1, 0.2, 0.05]).as_matrix()
+    offset = np.array([0.5 + 0.67, 0.55, 0.45]) - tilt @ [0.5, 0.5, 0.5]  # (x - 0.5) R^T + c = x R^T + offset
+    material = Material(E=1e5, nu=0.3, density=1000.0)
+    system = assemble_bodies([Body(mesh, material), Body(mesh, material, rotation=tilt, translation=offset)])
+    return system, ContactForce(system, friction=0.3)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[1_000, 10_000, 50_000], help="total tets")
+    parser.add_argument("--repeat", type=int, default=5, help="timed runs per size (the best is kept)")
+    args = parser.parse_args(argv)
+    print(f"{'tets':>7} {'nodes':>7} {'contacts':>8} {'detect ms':>9} {'paper ms':>8} {'depth ms':>8} "
+          f"{'force ms':>8} {'jacobian ms':>11} {'us/contact':>10} {'SpMV ms':>8} {'step/SpMV':>9}")
+    rng = np.random.default_rng(0)
+    for size in args.sizes:
+        system, contact = contact_scene(size)
+        bodies = system.collision_bodies
+        x = np.array(system.model.rest_positions)
+        v = rng.normal(scale=0.1, size=x.shape)
+        out = np.zeros_like(x)
+
+        def force():
+            contact._cache = None  # detect afresh, as at every new step or stage
+            contact.accumulate(x, v, 0.0, out)
+            return contact.contacts(x)
+
+        found = force()  # warm caches (edges, faces, adjacency are built once per scene)
+        detect, hits = best_time(lambda: detect_collisions(bodies, x), args.repeat)
+        depth, _ = best_time(lambda: consistent_penetration_depths(bodies, x, hits), args.repeat)
+        forces, _ = best_time(force, args.repeat)
+        jacobian, _ = best_time(lambda: contact.jacobian(x, v, 0.0), args.repeat)
+        spmv, _ = spmv_time(bodies, args.repeat)
+        nearest = min(PUBLISHED_DETECTION_MS, key=lambda t: abs(np.log(t / bodies.tet_count)))
+        paper = PUBLISHED_DETECTION_MS[nearest] * bodies.tet_count / nearest  # linear in tets, as published
+        step = forces + jacobian
+        print(f"{bodies.tet_count:>7} {bodies.node_count:>7} {found.count:>8} {1e3 * detect:>9.2f} {paper:>8.1f} "
+              f"{1e3 * depth:>8.2f} {1e3 * forces:>8.2f} {1e3 * jacobian:>11.2f} "
+              f"{1e6 * step / max(found.count, 1):>10.1f} {1e3 * spmv:>8.3f} {step / spmv:>9.0f}")
+    print("force = detection + depths + penalty/damping/friction; step = force + jacobian; paper ms: Teschner et al. "
+          "2003 detection scaled linearly from the nearest published size.")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
