@@ -113,6 +113,24 @@ def test_contact_options_are_checked():
         ObstacleContactForce(system, [object()])
 
 
+def test_self_collision_of_one_model_equals_two_bodies():
+    """One SpringModel whose mesh holds two disjoint cubes collides with itself like two bodies do."""
+    from volspring import SpringModel, TetMesh
+
+    system, two_bodies = colliding_cubes()
+    x = np.array(system.model.rest_positions)
+    x[system.mesh_nodes[1]] -= [0.012, 0, 0]  # 10 mm overlap
+    mesh = system.model.topology.mesh
+    single = SpringModel.from_mesh(TetMesh(x, mesh.tets), SOFT)
+    itself = ContactForce(single, self_collision=True)
+    v = np.random.default_rng(3).normal(scale=0.1, size=x.shape)
+    expected, found = forces(two_bodies, x, v), forces(itself, x, v)
+    assert two_bodies.contacts(x).count > 0
+    # Same contacts, same stiffness (same material and edge lengths): equal to round-off.
+    np.testing.assert_allclose(found, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
+    assert ContactForce(single).contacts(x).count == 0  # without self-collision one body never collides
+
+
 # ---------------------------------------------------------------------- momentum
 # Steps each integrator takes on the colliding cubes: spring omega_max = 778 rad/s and a contact
 # omega ~ sqrt(k_c / m_reduced) = 1.6e3 rad/s; 2e-4 s keeps h omega <= 0.33 for the explicit schemes

@@ -50,6 +50,19 @@ positive definite for CG. Left out (they are not symmetric): the rotation of r, 
 the friction force on lambda, of the damping on x. The linearised depth is exact for a vertex
 under a flat part of the surface; the tests compare it with finite differences.
 
+Known limits, measured in ``tests/test_contact.py``:
+
+- Frictionless contact is not conservative: the interpolated vertex normals of a coarse surface
+  tilt near its rim, so r is not the gradient of d and a body pressed on another can be pushed
+  sideways and gain energy (a 2 x 2 x 2-cell cube pressed on a block drifted off and gained more
+  energy than the push supplied). Friction holds it; give ``friction`` > 0 for resting contact.
+- Contacts are found at the start of a step only: a vertex can enter deep within one step when
+  omega_c h > 1 (omega_c = sqrt(k_c / m)); implicit Euler then pushes it out stably, but the
+  penalty energy of that first state can be many times the impact's kinetic energy.
+- The Jacobian leaves out how the reaction is redistributed over the tet's nodes as the
+  barycentric weights change (not symmetric; it moves no momentum and does not touch the
+  penetrating vertex's own row).
+
 Caching policy. Contacts are detected at the positions of every call (Runge-Kutta stages differ),
 but the last contact set is kept with a copy of its positions: ``accumulate``, ``jacobian`` and
 ``potential_energy`` at the same positions (as the implicit step and the energy monitor call
@@ -409,7 +422,8 @@ class ObstacleContactForce(_PenaltyResponse):
         return self.stiffness_factor * self._node_modulus * self._node_length
 
     def __repr__(self) -> str:
-        return f"ObstacleContactForce({len(self.obstacles)} obstacles, {len(self.nodes)} nodes, friction={self.friction:g})"
+        return (f"ObstacleContactForce({len(self.obstacles)} obstacles, {len(self.nodes)} nodes, "
+                f"friction={self.friction:g})")
 
     def _detect(self, x) -> PenaltyContacts:
         hits = obstacle_contacts(self.obstacles, x[self.nodes])
