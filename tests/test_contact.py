@@ -344,7 +344,10 @@ def test_ball_dropped_on_block_settles_shallow():
     ball = system.mesh_nodes[1]
     impact = 0.5 * system.body_masses[1] * 2 * 9.81 * 0.01
     assert scene.kinetic_energy(frames[-1].v) < 0.05 * impact
-    assert frames[-1].x[ball, 2].min() > -bound  # on the block, not through it (its top is z = 0)
+    # On the block, not through it: the ball's centre of mass (radius 50 mm, block top at z = 0) rests
+    # above half a radius (measured 43 mm: the soft block and ball give a little under the weight).
+    centre = system.model.masses[ball] @ frames[-1].x[ball, 2] / system.body_masses[1]
+    assert centre > 0.025
     # Energy never rises between frames (measured: it falls by at least 2e-4 J per 0.05 s).
     assert np.diff(result.total_energy).max() <= 0.0
 
