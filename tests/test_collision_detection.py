@@ -5,9 +5,9 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from conftest import cube_mesh
+from volspring import HalfSpace
 from volspring.collision import (
     CollisionBodies,
-    HalfSpace,
     SpatialHash,
     StaticTriangleMesh,
     detect_collisions,

@@ -10,7 +10,8 @@ import pytest
 
 from conftest import cube_mesh
 from volspring import Gravity, Material, Pins, Scene
-from volspring.collision import HalfSpace, StaticTriangleMesh
+from volspring import HalfSpace
+from volspring.collision import StaticTriangleMesh
 from volspring.collision.contact import ContactForce, ObstacleContactForce
 from volspring.collision.multibody import Body, assemble_bodies
 from volspring.diagnostics import linear_momentum

@@ -100,6 +100,25 @@ class HalfSpace:
         """(n,) float -- height of each node above the plane [m] (negative below)."""
         return (x - self.point) @ self.normal
 
+    def contacts(self, points):
+        """Points below the plane, for penalty contact (``volspring.collision.ObstacleContactForce``).
+
+        Returns
+        -------
+        vertex : (k,) int -- indices of the points below the plane
+        depth : (k,) float -- how far below [m]
+        direction : (k, 3) float -- the way out (the normal)
+        closest : (k, 3) float -- nearest points on the plane [m]
+        face : (k,) int -- -1 (a plane has no faces)
+        """
+        points = np.asarray(points, dtype=np.float64)
+        height = self.signed_distances(points)
+        vertex = np.flatnonzero(height < 0)
+        depth = -height[vertex]
+        direction = np.broadcast_to(self.normal, (len(vertex), 3)).copy()
+        closest = points[vertex] + depth[:, None] * self.normal
+        return vertex, depth, direction, closest, np.full(len(vertex), -1, dtype=np.int64)
+
     def project(self, x, v, x_start, t, dt, free) -> None:
         depth = -self.signed_distances(x)
         nodes = np.flatnonzero(free & (depth > 0))

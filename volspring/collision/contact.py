@@ -79,7 +79,8 @@ import scipy.sparse as sp
 
 from volspring.collision.bodies import CollisionBodies
 from volspring.collision.multibody import MultiBodyModel
-from volspring.collision.obstacles import HalfSpace, StaticTriangleMesh, obstacle_contacts
+from volspring.collision.obstacles import StaticTriangleMesh, obstacle_contacts
+from volspring.constraints import HalfSpace
 from volspring.collision.penetration import closest_surface_depths, consistent_penetration_depths
 from volspring.collision.spatial_hash import detect_collisions
 from volspring.model import SpringModel
@@ -389,7 +390,7 @@ class ObstacleContactForce(_PenaltyResponse):
     --------
     >>> import numpy as np
     >>> from volspring import SpringModel
-    >>> from volspring.collision import HalfSpace
+    >>> from volspring import HalfSpace
     >>> pair = SpringModel.from_arrays([[0, 0, -0.01], [1, 0, 0.5]], [1.0, 1.0], [[0, 1]], stiffness=100.0)
     >>> floor = ObstacleContactForce(pair, [HalfSpace((0, 0, 0), (0, 0, 1))], stiffness=1e4, damping=0.0)
     >>> forces = np.zeros((2, 3))
@@ -406,7 +407,7 @@ class ObstacleContactForce(_PenaltyResponse):
         self.obstacles = tuple(obstacles)
         for index, obstacle in enumerate(self.obstacles):
             if not isinstance(obstacle, (HalfSpace, StaticTriangleMesh)):
-                raise TypeError(f"obstacles[{index}] must be a collision.HalfSpace or StaticTriangleMesh, "
+                raise TypeError(f"obstacles[{index}] must be a volspring.HalfSpace or StaticTriangleMesh, "
                                 f"got {type(obstacle).__name__}")
         n = model.node_count
         self.nodes = np.arange(n) if nodes is None else np.unique(np.asarray(nodes, dtype=np.int64).ravel())

@@ -19,8 +19,9 @@ from functools import cached_property
 import numpy as np
 
 from volspring.collision.triangles import nearest_surface_points
+from volspring.constraints import HalfSpace
 
-__all__ = ["HalfSpace", "ObstacleContacts", "StaticTriangleMesh", "obstacle_contacts"]
+__all__ = ["ObstacleContacts", "StaticTriangleMesh", "obstacle_contacts"]
 
 
 def _unit(vector, name):
@@ -31,44 +32,6 @@ def _unit(vector, name):
     if length == 0:
         raise ValueError(f"{name} = {vector.tolist()} has zero length; expected a direction")
     return vector / length
-
-
-@dataclass(frozen=True, eq=False)
-class HalfSpace:
-    """The solid ``{x : (x - point).normal <= 0}``, e.g. a floor.
-
-    Parameters
-    ----------
-    point : (3,) float -- a point of the bounding plane [m]
-    normal : (3,) float -- outward normal (normalised here)
-
-    Examples
-    --------
-    >>> floor = HalfSpace(point=(0, 0, 0), normal=(0, 0, 1))
-    >>> vertex, depth, direction, closest, face = floor.contacts([[0.0, 0, -0.1], [0, 0, 0.2]])
-    >>> vertex.tolist(), depth.round(3).tolist(), direction.tolist()
-    ([0], [0.1], [[0.0, 0.0, 1.0]])
-    """
-
-    point: np.ndarray
-    normal: np.ndarray
-
-    def __post_init__(self):
-        point = np.asarray(self.point, dtype=np.float64)
-        if point.shape != (3,) or not np.isfinite(point).all():
-            raise ValueError(f"point must be 3 finite numbers, got {self.point!r}")
-        object.__setattr__(self, "point", point)
-        object.__setattr__(self, "normal", _unit(self.normal, "normal"))
-
-    def contacts(self, points):
-        """Vertices inside: ``(vertex (k,), depth (k,) [m], direction (k, 3), closest (k, 3) [m], face (k,) = -1)``."""
-        points = np.asarray(points, dtype=np.float64)
-        height = (points - self.point) @ self.normal
-        vertex = np.flatnonzero(height < 0)
-        depth = -height[vertex]
-        direction = np.broadcast_to(self.normal, (len(vertex), 3)).copy()
-        closest = points[vertex] + depth[:, None] * self.normal
-        return vertex, depth, direction, closest, np.full(len(vertex), -1, dtype=np.int64)
 
 
 @dataclass(frozen=True, eq=False)
@@ -261,6 +224,7 @@ def obstacle_contacts(obstacles, positions) -> ObstacleContacts:
     Examples
     --------
     >>> import numpy as np
+    >>> from volspring import HalfSpace
     >>> floor = HalfSpace(point=(0, 0, 0), normal=(0, 0, 1))
     >>> hits = obstacle_contacts([floor], np.array([[0.0, 0, -0.1], [0, 0, 0.2]]))
     >>> hits.vertex.tolist(), hits.obstacle.tolist()
