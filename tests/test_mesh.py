@@ -108,3 +108,14 @@ def test_msh_means_gmsh(tmp_path):
     path = cube_mesh().write(tmp_path / "cube.msh")
     # gmsh's own reader accepts what was written: the file is gmsh, not ansys (meshio's first pick).
     assert len(meshio.read(path, file_format="gmsh").points) == cube_mesh().node_count
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    import os
+
+    umask = os.umask(0o022)
+    try:
+        path = cube_mesh().write(tmp_path / "cube.vtu")
+    finally:
+        os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o644  # 0666 less the umask, as open() would give
