@@ -240,12 +240,15 @@ class AMGConjugateGradient(_LinearSolver):
     maxiter : int -- CG iteration cap
     on_failure : {"raise", "warn"}
     smoother : {"gauss_seidel", "jacobi"} -- block Gauss-Seidel (forward before, backward after
-        the coarse correction, so the V-cycle stays symmetric) or block Jacobi
+        the coarse correction, so the V-cycle stays symmetric) or block Jacobi. Measured on a
+        10k-node beam: block Jacobi needs twice the iterations; Chebyshev (degree 3, in A) saved
+        one iteration in five at 10k but nothing at 50k, and unlike Gauss-Seidel it is not
+        invariant to the diagonal scaling that large mass ratios bring, so it is not offered.
     max_coarse : int -- unknowns on the coarsest level (solved with a pseudo-inverse)
     strength_theta : float -- couplings weaker than theta (symmetric strength measure) are
-        dropped when aggregating; 0.05 cut CG iterations from 7 to 5 (rtol 1e-3) and 13 to 10
-        (rtol 1e-6) on a 50k-node beam at h omega_max = 50; a hierarchy with operator complexity
-        above 2.5 is rebuilt with theta = 0
+        dropped when aggregating; 0.05 cut CG iterations from 6 to 5 (rtol 1e-3) and 11 to 9
+        (rtol 1e-6) on a 50k-node gmsh beam at h omega_max = 50, for 10 % more work per cycle;
+        a hierarchy with operator complexity above 2.5 is rebuilt with theta = 0
 
     The candidates B are used as given (``improve_candidates=None``): rigid-body modes are
     already the near-null space, and relaxing them first doubled the setup time for the same

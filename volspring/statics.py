@@ -19,6 +19,10 @@ Where K is singular (e.g. a string at rest has no transverse stiffness) or a ste
 the energy, the step is retried with K + mu d I (d the mean diagonal of K), mu growing tenfold
 from 1e-8, and mu shrinks again after successful steps.
 
+Linear solves use :mod:`volspring.solvers` (AMG-CG by default, to ``linear_rtol``: an inexact
+Newton method); the AMG hierarchy is rebuilt for every Newton step since the stiffness changes
+much more between Newton iterates than between time steps.
+
 Convergence: ||F_free|| <= rtol ||load_free||, where the load is everything but the springs (the
 scene's forces at x). A scene without pins has no static equilibrium under a net load (the body
 would fall), and only one up to a rigid motion without: :func:`solve_static` refuses it.
