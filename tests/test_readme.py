@@ -13,3 +13,4 @@ def test_readme_python_blocks_run(tmp_path, monkeypatch):
     for block in blocks:
         exec(compile(block, str(README), "exec"), {"__name__": "__readme__"})
     assert (tmp_path / "beam_frames" / "frame.pvd").is_file()
+    assert (tmp_path / "ball_frames" / "ball_on_block.pvd").is_file()
