@@ -236,7 +236,7 @@ def test_amg_iterations_roughly_independent_of_mesh_size_and_far_below_jacobi():
 
 @pytest.mark.slow
 def test_amg_iterations_independent_of_size_1k_to_50k():
-    sizes = [(40, 5, 5), (80, 10, 10), (140, 18, 18)]  # 1476, 10241, 51395 nodes
+    sizes = [(40, 5, 5), (80, 10, 10), (140, 18, 18)]  # 1476, 9801, 50901 nodes; measured 7, 7, 7
     amg = [_iterations(beam(cells), 50.0, "amg", steps=3) for cells in sizes]
     assert max(amg) <= 1.5 * min(amg) + 2, amg
 
