@@ -109,8 +109,7 @@ def run(scene, dt, *, steps, **options):
         info = integrator.last_solve
         records.append((cpu, wall, info.forces_seconds, info.assembly_seconds, info.setup_seconds,
                         info.solve_seconds, info.iterations, info.rebuilt))
-    pattern = integrator.pattern(scene)
-    matrix = integrator._assemble(scene, pattern, state.x, state.v, state.t, dt).matrix
+    matrix, _, _ = integrator.linear_system(scene, state, dt)
     vector = np.random.default_rng(0).standard_normal(matrix.shape[0])
     matvec = median_seconds(lambda: matrix @ vector)
     return np.array(records, dtype=float), matvec, state

@@ -219,6 +219,19 @@ class ImplicitEuler(Integrator):
         return _System(matrix, extra, springs, forces, solvers.clock() - clock, extra_full,
                        None if dfdx is None else sp.csr_matrix(dfdx))
 
+    def linear_system(self, scene: Scene, state: State, dt: float):
+        """The linearised system of one step from ``state``, over the free unknowns.
+
+        Returns
+        -------
+        matrix : (3f, 3f) BSR -- M - h dF/dv - h^2 dF/dx of the springs (plus diagonal scene terms)
+        extra : (3f, 3f) CSR or None -- non-diagonal scene-force terms, applied separately
+        pattern : BlockPattern -- numbering of the unknowns (``pattern.free_nodes``)
+        """
+        pattern = self.pattern(scene)
+        system = self._assemble(scene, pattern, state.x, state.v, state.t, float(dt))
+        return system.matrix, system.extra, pattern
+
     # ------------------------------------------------------------------ hierarchy policy
     def _needs_rebuild(self, memory, pattern, step, dt) -> str:
         """Why the hierarchy must be rebuilt at the start of this step ('' when it need not)."""
