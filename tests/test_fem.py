@@ -5,7 +5,9 @@ import pytest
 from conftest import cube_mesh
 
 from validation import analytic
-from validation.fem import (Box, Clamp, Traction, _skfem_space, error_norms, solve_modes, solve_static)
+from validation.boundary import Box, Clamp, Traction
+from validation.fem import error_norms, solve_modes, solve_static
+from validation.fem_assembly import skfem_space
 
 # A small-deformation beam: L/h = 10, deflections about 0.15% of L (REFERENCE.md section 6
 # asks for ~1% or less, so geometric nonlinearity does not enter the comparison).
@@ -79,7 +81,7 @@ def test_amg_agrees_with_direct(beam, element):
 def test_p2_clamp_holds_edge_dofs(beam):
     """All P2 dofs on the clamped face are zero, not only the vertex ones (the leak REFERENCE.md 6 warns of)."""
     solution = solve_static(beam, BEAM, clamp=Box.plane("x", 0.0), gravity=(0, 0, -G))
-    locations = _skfem_space(beam, "P2").basis.doflocs.T
+    locations = skfem_space(beam, "P2").basis.doflocs.T
     on_face = np.isclose(locations[:, 0], 0.0)
     assert on_face.sum() == 3 * (5 * 5)  # 3x3 vertices + 16 edge midpoints on the 2x2-cell face, 3 components
     assert np.all(solution.dofs[on_face] == 0.0)
@@ -362,3 +364,28 @@ def test_cache_recovers_from_a_damaged_file(tmp_path, unit_cube):
                                   first.displacement)
     with pytest.raises(TypeError, match="body_force"):
         cached_solve_static(unit_cube, BEAM, folder=tmp_path, body_force=lambda p: 0 * p, **arguments)
+
+
+def test_cache_key_covers_every_module_of_the_reference(monkeypatch, tmp_path, unit_cube):
+    import inspect
+    from pathlib import Path
+
+    from validation import cache, fem, fem_solvers
+
+    # The validation modules the FEM answer is computed by: what validation.fem uses, transitively.
+    modules, pending = set(), [fem]
+    while pending:
+        module = pending.pop()
+        if module.__name__ not in modules:
+            modules.add(module.__name__)
+            used = {inspect.getmodule(value) for value in vars(module).values()
+                    if inspect.isfunction(value) or inspect.isclass(value) or inspect.ismodule(value)}
+            pending += [item for item in used if item is not None and item.__name__.startswith("validation.")]
+    assert modules == {module.__name__ for module in cache.REFERENCE_MODULES}
+    # So an edit to the solver module alone starts the cache afresh.
+    arguments = {"clamp": Box.plane("z", 0.0), "gravity": (0, 0, -G), "element": "P1"}
+    key = cache.cache_key("static", unit_cube, BEAM, **arguments)
+    edited = tmp_path / "fem_solvers.py"
+    edited.write_bytes(Path(fem_solvers.__file__).read_bytes() + b"# edited\n")
+    monkeypatch.setattr(fem_solvers, "__file__", str(edited))
+    assert cache.cache_key("static", unit_cube, BEAM, **arguments) != key

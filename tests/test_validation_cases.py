@@ -4,11 +4,12 @@ import numpy as np
 import pytest
 
 from validation.beams import box_mesh
+from validation.boundary import Box, Traction
 from validation.cases import (CASE_NAMES, build_case, check_held, hanging_bar, own_mesh_case, parse_region,
                               uniaxial_compression)
-from validation.compare import (RULES, compare_static, effective_constants, rest_stiffness_matrix,
-                                spring_frequencies, spring_model, spring_static, traction_forces, uniform_stiffness)
-from validation.fem import Box, Traction
+from validation.compare import RULES, compare_static
+from validation.springs import (effective_constants, rest_stiffness_matrix, spring_frequencies, spring_model,
+                                spring_static, traction_forces, uniform_stiffness)
 from validation.studies import fit_rate, pareto_front, speed_study
 from volspring import Material, SpringModel
 

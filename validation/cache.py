@@ -4,8 +4,9 @@ A P2 reference costs seconds to minutes (REFERENCE.md: about 6 s to assemble at 
 10k with scikit-fem's default quadrature), and reports solve the same cases again and again. The key
 is a SHA-256 of the mesh (points and tets bytes), the element, the material, the loads and the
 clamps *as resolved on the mesh* (fixed-dof masks and values, loaded faces), the modal options, and
-the code version (volspring's version and the bytes of ``validation/fem.py``), so a callable region
-is cached by what it selects, and any change to the reference code starts afresh. Files are
+the code version (volspring's version and the bytes of every module the FEM answer depends on:
+``validation/boundary.py``, ``fem_assembly.py``, ``fem_solvers.py`` and ``fem.py``), so a callable
+region is cached by what it selects, and any change to the reference code starts afresh. Files are
 ``<folder>/<kind>-<key>.npz``, written atomically.
 
 Examples
@@ -14,7 +15,7 @@ Examples
 >>> import numpy as np
 >>> from volspring import TetMesh
 >>> from validation.cache import cached_solve_static
->>> from validation.fem import Box
+>>> from validation.boundary import Box
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 >>> cube = TetMesh.oriented(corners, [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]])
 >>> folder = tempfile.mkdtemp()
@@ -36,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 import volspring
-from validation import fem
+from validation import boundary, fem, fem_assembly, fem_solvers
 from volspring._io import atomic_path
 
 __all__ = ["cache_key", "cached_solve_modes", "cached_solve_static", "default_folder"]
@@ -49,8 +50,13 @@ def default_folder() -> Path:
     return Path(os.environ.get("VOLSPRING_CACHE") or Path.home() / ".cache" / "volspring" / "fem")
 
 
+#: The modules whose code determines a FEM answer: a change to any of them changes every key.
+REFERENCE_MODULES = (boundary, fem_assembly, fem_solvers, fem)
+
+
 def _code_version() -> bytes:
-    return volspring.__version__.encode() + Path(fem.__file__).read_bytes()
+    return volspring.__version__.encode() + b"".join(Path(module.__file__).read_bytes()
+                                                     for module in REFERENCE_MODULES)
 
 
 def cache_key(kind: str, mesh, material, *, clamp, gravity=None, traction=None, point_loads=None,
@@ -85,11 +91,12 @@ def cache_key(kind: str, mesh, material, *, clamp, gravity=None, traction=None, 
             digest.update(array.tobytes())
 
     add(kind, element, _code_version(), mesh.points, mesh.tets, fem.elastic_constants(material))
-    fixed = fem._fixed_dofs(mesh, clamp)
+    fixed = boundary.resolve_clamps(mesh, clamp)
     add(fixed.node_mask, fixed.node_values, fixed.edge_mask, fixed.edge_values)
-    for faces, vector in fem._tractions(mesh, traction):
+    for faces, vector in boundary.resolve_tractions(mesh, traction):
         add(np.sort(faces, axis=1), vector)
-    add(fem._point_loads(mesh, point_loads), np.asarray(gravity if gravity is not None else np.zeros(3), float))
+    add(boundary.resolve_point_loads(mesh, point_loads),
+        np.asarray(gravity if gravity is not None else np.zeros(3), float))
     for name in sorted(options):
         add(name, options[name])
     return digest.hexdigest()
@@ -117,8 +124,8 @@ def _load(path: Path, cls):
     values = {}
     for item in dataclasses.fields(cls):
         if item.name == "info":
-            values["info"] = fem.SolverInfo(**{sub.name: plain(arrays[f"info.{sub.name}"])
-                                              for sub in dataclasses.fields(fem.SolverInfo)})
+            values["info"] = fem_solvers.SolverInfo(**{sub.name: plain(arrays[f"info.{sub.name}"])
+                                                      for sub in dataclasses.fields(fem_solvers.SolverInfo)})
         else:
             values[item.name] = plain(arrays[item.name])
     return cls(**values)

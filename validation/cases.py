@@ -48,7 +48,7 @@ import numpy as np
 
 from validation import analytic
 from validation.beams import beam_cells, box_mesh
-from validation.fem import Box, Clamp, Traction
+from validation.boundary import Box, Clamp, Traction
 from volspring.material import Material
 from volspring.mesh import TetMesh
 
