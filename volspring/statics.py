@@ -201,7 +201,7 @@ def _newton_step(linear, pattern, blocks, extra, residual, shift, x):
         if linear.method == "amg":
             linear.build(stiffness, rigid_body_modes(x[pattern.free_nodes]))
         return linear.solve(stiffness, residual, extra=extra)
-    except (SolverNotConverged, np.linalg.LinAlgError, ArithmeticError) as error:
+    except (SolverNotConverged, np.linalg.LinAlgError, ArithmeticError, RuntimeError) as error:
         logger.debug("static Newton step failed (%s)", error)
         return None, None
 
