@@ -172,3 +172,20 @@ def test_speed_study_flags_unstable_steps_and_measures_the_frequency(cache_folde
     assert abs(stable["first_frequency_error"]) < 5e-3
     # exp(-c T / 2) = exp(-4.5) of the initial amplitude is left at the end: 1% of the deflection.
     assert abs(stable["settled_deflection_error"]) < 2e-2
+    # A diverged run's wall time is per simulated second it reached, not per second asked.
+    assert unstable["simulated_s"] < study["duration_s"] <= stable["simulated_s"] < study["duration_s"] + stable["dt_s"]
+    assert unstable["wall_seconds_per_simulated_second"] == pytest.approx(
+        unstable["wall_seconds"] / unstable["simulated_s"], rel=1e-12)
+
+
+def test_speed_study_runs_periods_of_the_loaded_mode_with_a_drag_that_settles(cache_folder):
+    study = speed_study(per_height=1, steps={"implicit_euler": (100.0,)}, periods=3.0, folder=cache_folder)
+    # The duration is three periods of the spring model's loaded mode, and the drag leaves 5e-5 (the
+    # default residual_amplitude) of the motion at its end: both exact by construction.
+    assert study["duration_s"] == pytest.approx(3.0 / study["spring_first_frequency_hz"], rel=1e-12)
+    assert study["residual_amplitude"] == pytest.approx(5e-5, rel=1e-12)
+    (run,) = study["runs"]
+    assert run["stable"] and run["simulated_s"] >= study["duration_s"]
+    # 100 x 2 / omega_max is far above the loaded mode's accuracy limit but settles: implicit Euler
+    # damps the oscillation, so the end state is the equilibrium to well below the 5e-5 left by the drag.
+    assert abs(run["settled_deflection_error"]) < 5e-5
