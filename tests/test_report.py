@@ -6,9 +6,10 @@ import numpy as np
 import pytest
 
 from validation.cli import main
-from validation.compare import spring_model, spring_static, tip_deflection
+from validation.compare import tip_deflection
 from validation.cases import cantilever_gravity
 from validation.fem import solve_static
+from validation.springs import spring_model, spring_static
 from volspring import TetMesh
 
 
@@ -82,6 +83,46 @@ def test_speed_table_has_stable_and_unstable_runs(quick_run):
     assert all(run["stable"] for run in runs if run["integrator"] == "implicit_euler")  # unconditionally stable
     assert not any(run["stable"] for run in runs if run["integrator"] == "explicit_euler")
     assert any(run.get("pareto") for run in runs)
+
+
+def test_log_axes_label_major_ticks_only():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+
+    from validation.report import _log_ticks
+
+    figure, axes = plt.subplots()
+    axes.loglog([0.2, 0.9], [1e-6, 1e-2])  # x within one decade (the crowded case), y over four
+    _log_ticks(axes)
+    for axis, limits in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
+        assert isinstance(axis.get_minor_formatter(), NullFormatter)
+        shown = [v for v in axis.get_major_locator()() if limits[0] <= v <= limits[1]]
+        assert len(shown) >= 2  # still labelled: an axis inside one decade gets majors at 1, 2, 5 x 10^k
+    plt.close(figure)
+
+
+@pytest.mark.slow
+def test_full_run_writes_the_three_outputs(tmp_path):
+    """The full run (no --quick), from an empty cache: about 2 minutes on 2 cores."""
+    out = tmp_path / "full"
+    status = main(["--out", str(out), "--cache", str(tmp_path / "cache"), "--no-progress"])
+    assert status == 0
+    results = json.loads((out / "results.json").read_text())
+    assert results["quick"] is False
+    assert (out / "report.html").read_text().count("data:image/png;base64,") >= 5
+    assert (out / "vtu" / "cantilever_gravity.vtu").is_file()
+    assert results["studies"]["refinement"]["levels"] == [1, 2, 3, 4]
+    runs = results["studies"]["speed"]["runs"]
+    for name in {run["integrator"] for run in runs}:
+        mine = [run for run in runs if run["integrator"] == name]
+        assert len(mine) >= 3
+    implicit = [run["step_factor"] for run in runs if run["integrator"] == "implicit_euler"]
+    assert min(implicit) == 1.0 and max(implicit) == 1000.0
+    for name in ("symplectic_euler", "rk4", "verlet", "time_corrected_verlet"):  # stable to unstable
+        assert {run["stable"] for run in runs if run["integrator"] == name} == {True, False}
 
 
 @pytest.fixture

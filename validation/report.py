@@ -94,12 +94,17 @@ def versions() -> dict:
 
 # ---------------------------------------------------------------------------- running
 def _settings(quick: bool) -> dict:
+    """What ``--quick`` trims. The speed study runs five periods of the loaded mode with a drag that
+    leaves 5e-5 of the motion at the end (a damping ratio of 0.32): its cost is the step count, so
+    the full run's finer beam (twice omega_max, half the critical step) gets the same simulated
+    time, not more. Measured on 2 cores: quick about 25 s, full about 2 minutes, most of it the
+    speed study."""
     if quick:
         return {"refinement_levels": (1, 2), "reference_level": 4, "speed_per_height": 1,
-                "speed_steps": studies.QUICK_INTEGRATOR_STEPS, "speed_duration_s": 0.4, "speed_drag_rate_per_s": 50.0,
-                "cauchy_cells": 3}
+                "speed_steps": studies.QUICK_INTEGRATOR_STEPS, "speed_periods": 5.0,
+                "speed_residual_amplitude": 5e-5, "cauchy_cells": 3}
     return {"refinement_levels": (1, 2, 3, 4), "reference_level": 6, "speed_per_height": 2,
-            "speed_steps": studies.INTEGRATOR_STEPS, "speed_duration_s": 1.0, "speed_drag_rate_per_s": 20.0,
+            "speed_steps": studies.INTEGRATOR_STEPS, "speed_periods": 5.0, "speed_residual_amplitude": 5e-5,
             "cauchy_cells": 4}
 
 
@@ -164,8 +169,8 @@ def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULE
         elif name == "speed":
             results["studies"]["speed"] = studies.speed_study(
                 per_height=settings["speed_per_height"], steps=settings["speed_steps"],
-                duration=settings["speed_duration_s"], drag_rate=settings["speed_drag_rate_per_s"], folder=folder,
-                progress=note)
+                periods=settings["speed_periods"], residual_amplitude=settings["speed_residual_amplitude"],
+                folder=folder, progress=note)
         elif name == "cauchy":
             results["studies"]["cauchy"] = studies.cauchy_study(cells=settings["cauchy_cells"], rules=rules)
         done += weights[name]
@@ -304,6 +309,24 @@ def _png(figure) -> str:
     return base64.b64encode(buffer.getvalue()).decode("ascii")
 
 
+def _log_ticks(axes) -> None:
+    """Readable log axes: no labels on the minor ticks (matplotlib labels them when an axis spans
+    few decades, and "2x10^-1 3x10^-1 ..." overlap); an axis that holds fewer than two powers of ten
+    gets majors at 1, 2 and 5 x 10^k, labelled as plain numbers, so it still has labels. Call after
+    plotting: it reads the autoscaled limits."""
+    from matplotlib import ticker
+
+    for axis, scale, limits in ((axes.xaxis, axes.get_xscale(), axes.get_xlim()),
+                                (axes.yaxis, axes.get_yscale(), axes.get_ylim())):
+        if scale != "log":
+            continue
+        low, high = sorted(limits)
+        if math.floor(math.log10(high)) - math.ceil(math.log10(low)) + 1 < 2:
+            axis.set_major_locator(ticker.LogLocator(base=10.0, subs=(1.0, 2.0, 5.0)))
+            axis.set_major_formatter(ticker.FuncFormatter(lambda value, position: f"{value:g}"))
+        axis.set_minor_formatter(ticker.NullFormatter())
+
+
 def _label(model: str) -> str:
     return {"fem_P2": "FEM P2 (reference)", "fem_P1": "FEM P1"}.get(model, model.replace("springs_", "springs: "))
 
@@ -346,6 +369,8 @@ def _figures(results: dict) -> dict:
         axes.set_title("Cantilever under gravity: refinement")
         axes.legend(fontsize=8)
         axes.grid(alpha=0.3, which="both")
+        _log_ticks(axes)
+        axes.set_xticks(n, [str(count) for count in n])  # the node counts studied, not powers of ten
         figures["refinement"] = _png(figure)
     sweep = results["cases"].get("uniaxial_compression", {}).get("sweep")
     if sweep:
@@ -389,21 +414,31 @@ def _figures(results: dict) -> dict:
                                     else "model_deflection_error"])
             axes.axhline(model_error, color="grey", ls=":", label="springs vs FEM P2 (model error)")
             axes.set_xlabel("wall time per simulated second [s]")
-            axes.set_ylabel(f"|{title} error| vs the spring model's exact answer")
+            axes.set_ylabel(f"|{title} error|\nvs the spring model's own answer")
             axes.set_title(f"Speed vs accuracy: {title}")
             axes.grid(alpha=0.3, which="both")
-        panels[0].legend(fontsize=7)
+            _log_ticks(axes)
+        # One legend for both panels, below them: inside a panel it hides the points.
+        legend = {}
+        for axes in panels:
+            for handle, label in zip(*axes.get_legend_handles_labels()):
+                legend.setdefault(label, handle)
+        figure.legend(legend.values(), legend.keys(), loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=4,
+                      fontsize=8, frameon=False)
+        figure.tight_layout()
         figures["speed"] = _png(figure)
     cauchy = results["studies"].get("cauchy")
     if cauchy:
         figure, axes = plt.subplots(figsize=(6.4, 4.2))
         asked = sorted({m["nu_asked"] for m in cauchy["measurements"]})
         axes.plot(asked, asked, "k--", label="asked")
+        rule_colors = {rule: f"C{index}" for index, rule in enumerate(dict.fromkeys(
+            key.split("/")[1] for key in cauchy["summary"]))}
         for key in cauchy["summary"]:
             pattern, rule = key.split("/")
             mine = [m for m in cauchy["measurements"] if m["pattern"] == pattern and m["rule"] == rule]
             axes.plot([m["nu_asked"] for m in mine], [m["nu_effective"] for m in mine], "o-" if pattern == "mirrored"
-                      else "x:", label=f"{rule} ({pattern} mesh)")
+                      else "x:", color=rule_colors[rule], label=f"{rule} ({pattern} mesh)")
         axes.set_xlabel("nu asked")
         axes.set_ylabel("effective nu of the spring network")
         axes.set_title("The Cauchy limit: one nu whatever is asked")
@@ -425,6 +460,8 @@ def _fmt(value, kind="number") -> str:
         return "(" + ", ".join(_fmt(v) for v in value) + ")"
     if kind == "percent":
         return f"{100 * value:+.1f}%"
+    if kind == "percent_small":  # two significant digits: integrator errors are often far below 0.1%
+        return f"{100 * value:+.2g}%"
     if isinstance(value, (int, np.integer)):
         return str(value)
     return f"{value:.4g}"
@@ -536,14 +573,18 @@ def _html(results: dict, figures: dict) -> str:
         for run in speed["runs"]:
             rows.append([run["integrator"], f"{run['step_factor']:g} x {run['step_unit']}", _fmt(run["dt_s"]),
                          _fmt(run["stable"]), _fmt(run["wall_seconds_per_simulated_second"]),
-                         _fmt(run.get("settled_deflection_error"), "percent"),
-                         _fmt(run.get("first_frequency_error"), "percent"),
+                         _fmt(run.get("settled_deflection_error"), "percent_small"),
+                         _fmt(run.get("first_frequency_error"), "percent_small"),
                          _fmt(run.get("first_frequency_error_vs_fem"), "percent"),
                          ", ".join(run.get("pareto", [])).replace("_error", "") or ""])
         parts.append(
             "<h2 id='speed'>Speed and accuracy of the integrators</h2>"
             f"<p>The spring cantilever ({speed['node_count']} nodes, rule {speed['rule']}) released from rest under "
-            f"gravity with drag {speed['drag_rate_per_s']:g} /s, {speed['duration_s']:g} s simulated. omega_max = "
+            f"gravity, {_fmt(speed.get('periods'))} periods of the mode gravity loads ({_fmt(speed['duration_s'])} s) "
+            f"simulated with a drag of {_fmt(speed['drag_rate_per_s'])} /s (damping ratio "
+            f"{_fmt(speed.get('damping_ratio'))}) that leaves {_fmt(speed.get('residual_amplitude'))} of the motion "
+            "at the end; wall time per simulated second is over the time a run reached (a diverged run stops "
+            "early). omega_max = "
             f"{_fmt(speed['omega_max_rad_per_s'])} rad/s. Errors against the spring model's own static equilibrium "
             f"({_fmt(1e3 * speed['spring_settled_deflection_m'])} mm) and first frequency "
             f"({_fmt(speed['spring_first_frequency_hz'])} Hz); the model itself is "
