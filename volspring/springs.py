@@ -14,16 +14,18 @@ from __future__ import annotations
 
 import numpy as np
 
+from volspring.topology import vector_lengths
+
 __all__ = ["spring_forces", "spring_energy", "spring_strains", "spring_stiffness_blocks", "damper_blocks"]
 
 
 def _directions(model, x):
-    i, j = model.springs.T
-    d = x[j] - x[i]
-    length = np.linalg.norm(d, axis=1)
+    d = model.difference @ x
+    length = vector_lengths(d)
     if length.size and length.min() == 0.0:
         e = int(np.argmin(length))
-        raise FloatingPointError(f"spring {e} between nodes {i[e]} and {j[e]} has collapsed to zero length")
+        i, j = model.springs[e]
+        raise FloatingPointError(f"spring {e} between nodes {i} and {j} has collapsed to zero length")
     return d / length[:, None], length
 
 
@@ -43,8 +45,8 @@ def spring_forces(model, x, v=None) -> np.ndarray:
     r, length = _directions(model, x)
     magnitude = model.stiffness * (length - model.rest_lengths)
     if v is not None and model.damping.any():
-        i, j = model.springs.T
-        magnitude -= model.damping * np.einsum("ij,ij->i", v[i] - v[j], r)
+        # (v_i - v_j) . r = -(v_j - v_i) . r
+        magnitude += model.damping * np.einsum("ij,ij->i", model.difference @ v, r)
     return model.incidence @ (magnitude[:, None] * r)
 
 

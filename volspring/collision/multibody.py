@@ -223,10 +223,9 @@ def assemble_bodies(bodies) -> MultiBodyModel:
                             np.concatenate([m.tets + o for m, o in zip(placed, mesh_offsets)]))
     topology = SpringTopology(combined_mesh, points, springs, kinds, triangles, shell_layer,
                               max(t.shell_thickness for t, *_ in parts))
-    rest_lengths = np.linalg.norm(points[springs[:, 1]] - points[springs[:, 0]], axis=1)
     materials = {body.material for body in bodies}
     rules = {body.rule for body in bodies}
-    model = SpringModel(points, masses, topology.springs, stiffness, damping, rest_lengths, kinds,
+    model = SpringModel(points, masses, topology.springs, stiffness, damping, topology.rest_lengths, kinds,
                         topology=topology, material=materials.pop() if len(materials) == 1 else None,
                         rule=rules.pop() if len(rules) == 1 else "mixed")
     collision_bodies = CollisionBodies(tuple(placed))
