@@ -23,13 +23,16 @@ numbered by reverse Cuthill-McKee by default (cache locality), not by node index
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import replace
 
 import numpy as np
 import scipy.sparse as sp
 
+from volspring.errors import SpringCollapsed
+from volspring.model import SpringModel
+from volspring.springs import spring_linearization
 
-__all__ = ["BlockPattern", "SpringLinearization", "linearize_springs", "stiffness_times", "rigid_body_modes"]
+__all__ = ["BlockPattern", "linearize_springs", "stiffness_times", "rigid_body_modes"]
 
 
 class BlockPattern:
@@ -95,16 +98,15 @@ class BlockPattern:
         self.spring_order = np.argsort(local.min(axis=1), kind="stable")
         springs = local[self.spring_order]
         self.springs = springs
-        self.stiffness = model.stiffness[self.spring_order]
-        self.damping = model.damping[self.spring_order]
-        self.rest_lengths = model.rest_lengths[self.spring_order]
+        # The same network in the local numbering: the spring kernels run on it directly.
+        order = self.spring_order
+        self.local_model = SpringModel(model.rest_positions[self.node_order], model.masses[self.node_order],
+                                       springs, model.stiffness[order], model.damping[order],
+                                       model.rest_lengths[order], model.kinds[order])
+        self.incidence = self.local_model.incidence
+        self.difference = self.local_model.difference
         s = model.spring_count
         spring_ids = np.arange(s)
-        # (n, s) sparse: +1 at (i, e), -1 at (j, e) in local numbering; difference = -incidence^T
-        # gives x_j - x_i per spring (a sparse product beats fancy indexing).
-        self.incidence = sp.csr_matrix((np.concatenate([np.ones(s), -np.ones(s)]),
-                                        (springs.T.ravel(), np.tile(spring_ids, 2))), shape=(n, s))
-        self.difference = (-self.incidence.T).tocsr()
 
         a, b = (np.where(springs < f, springs, -1)).T
         both = (a >= 0) & (b >= 0)
@@ -221,77 +223,33 @@ class BlockPattern:
         return out[self.node_rank]
 
 
-@dataclass(frozen=True, eq=False)
-class SpringLinearization:
-    """The springs' forces and Jacobian blocks at one configuration (from :func:`linearize_springs`).
-
-    Per-spring arrays are in the pattern's spring order (``pattern.spring_order[k]`` is the
-    model spring of row k); the forces are per model node.
-
-    Parameters
-    ----------
-    blocks : (s, 3, 3) float -- W_e = c_K H_e + c_D D_e
-    directions : (s, 3) float -- unit vectors r_e from i to j
-    lengths : (s,) float -- current lengths [m]
-    axial : (s,) float -- k_e, coefficient of r r^T in H_e [N/m]
-    transverse : (s,) float -- k_e (1 - l0/l), clamped if asked: coefficient of the transverse
-        projector in H_e [N/m]
-    forces : (n, 3) float -- spring (and damper, if velocities were given) forces on the nodes [N]
-    """
-
-    blocks: np.ndarray
-    directions: np.ndarray
-    lengths: np.ndarray
-    axial: np.ndarray
-    transverse: np.ndarray
-    forces: np.ndarray
-
-
 def linearize_springs(pattern, x, v=None, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
-    """Spring forces and the blocks c_K H_e + c_D D_e in one pass over the springs.
+    """:func:`volspring.springs.spring_linearization` in the pattern's local numbering.
 
-    The blocks equal ``(stiffness_scale * spring_stiffness_blocks(model, x) + damping_scale *
-    damper_blocks(model, x))[pattern.spring_order]`` and the forces ``spring_forces(model, x, v)``,
-    but the directions are computed once (with the pattern's sparse difference operator, much
-    faster than fancy indexing, in the pattern's local numbering for memory locality) and each
-    block is written once from the scalar coefficients of r r^T and I.
+    Per-spring arrays come out in the pattern's spring order (``pattern.spring_order[k]`` is the
+    model spring of row k), ready for :meth:`BlockPattern.data`; the forces are per model node.
+    The local numbering keeps every per-spring pass and the scatter walking memory nearly in order.
 
     Parameters
     ----------
     pattern : BlockPattern -- of the model
     x : (n, 3) float -- positions [m]
     v : (n, 3) float, optional -- velocities [m/s]; without them the dampers exert no force
-    stiffness_scale : float -- c_K (h^2 [s^2] for the implicit step, 1 for statics)
-    damping_scale : float -- c_D (h [s] for the implicit step)
-    clamp_compression : bool -- clamp the transverse term (1 - l0/l) at 0
+    stiffness_scale, damping_scale, clamp_compression -- as for ``spring_linearization``
 
     Returns
     -------
     SpringLinearization
     """
     p = pattern
-    d = p.difference @ x[p.node_order]
-    length = np.sqrt(np.einsum("ij,ij->i", d, d))
-    if length.size and not length.min() > 0.0:
-        e = int(np.argmin(length))
-        i, j = p.model.springs[p.spring_order[e]]
-        raise FloatingPointError(f"spring {p.spring_order[e]} between nodes {i} and {j} has length {length[e]}, "
-                                 "expected > 0")
-    r = d / length[:, None]
-    magnitude = p.stiffness * (length - p.rest_lengths)
-    if v is not None and p.damping.any():
-        magnitude += p.damping * np.einsum("ij,ij->i", p.difference @ v[p.node_order], r)
-    forces = (p.incidence @ (magnitude[:, None] * r))[p.node_rank]
-    transverse = 1.0 - p.rest_lengths / length
-    if clamp_compression:
-        np.maximum(transverse, 0.0, out=transverse)
-    transverse *= p.stiffness
-    along = stiffness_scale * (p.stiffness - transverse)
-    if damping_scale:
-        along += damping_scale * p.damping
-    blocks = r[:, :, None] * (along[:, None] * r)[:, None, :]
-    blocks.reshape(-1, 9)[:, ::4] += (stiffness_scale * transverse)[:, None]
-    return SpringLinearization(blocks, r, length, p.stiffness, transverse, forces)
+    try:
+        local = spring_linearization(p.local_model, x[p.node_order], None if v is None else v[p.node_order],
+                                     stiffness_scale=stiffness_scale, damping_scale=damping_scale,
+                                     clamp_compression=clamp_compression)
+    except SpringCollapsed as collapsed:
+        spring = int(p.spring_order[collapsed.spring])
+        raise SpringCollapsed(spring, *p.model.springs[spring]) from None
+    return replace(local, forces=local.forces[p.node_rank])
 
 
 def stiffness_times(pattern, linearization, u) -> np.ndarray:

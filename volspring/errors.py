@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-__all__ = ["SimulationDiverged", "StepTooLarge", "StepTooLargeWarning", "SolverNotConverged"]
+__all__ = ["SimulationDiverged", "SpringCollapsed", "StepTooLarge", "StepTooLargeWarning", "SolverNotConverged"]
 
 
 class SimulationDiverged(FloatingPointError):
@@ -15,6 +15,14 @@ class SimulationDiverged(FloatingPointError):
         self.step, self.time, self.dt, self.node = step, time, dt, node
         super().__init__(f"simulation diverged at step {step} (t = {time:.6g} s, dt = {dt:.6g} s), "
                          f"worst node {node}: {reason}")
+
+
+class SpringCollapsed(FloatingPointError):
+    """A spring reached zero length, so its direction is undefined; ``spring`` is its index."""
+
+    def __init__(self, spring, i, j):
+        self.spring = spring
+        super().__init__(f"spring {spring} between nodes {i} and {j} has collapsed to zero length")
 
 
 class StepTooLargeWarning(RuntimeWarning):
