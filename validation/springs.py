@@ -44,6 +44,7 @@ import scipy.sparse as sp
 
 from validation.boundary import Box, Clamp
 from validation.cases import Case, check_held
+from volspring.assembly import stiffness_matrix
 from volspring.material import Material
 from volspring.mesh import TetMesh, signed_tet_volumes
 from volspring.model import SpringModel
@@ -90,21 +91,9 @@ def spring_model(mesh: TetMesh, material: Material, rule: str, **options) -> Spr
 def rest_stiffness_matrix(model: SpringModel) -> sp.csr_matrix:
     """(3n, 3n) CSR -- K = -dF/dx of the springs at rest [N/m], dof 3 i + c.
 
-    Each spring adds k r r^T to its two diagonal blocks and -k r r^T to the two off-diagonal ones
-    (at rest the transverse term k (1 - l0/l) is zero).
+    At rest the transverse term k (1 - l0/l) of each block is zero: K is the sum of k r r^T blocks.
     """
-    x = model.rest_positions
-    i, j = model.springs.T
-    r = (x[j] - x[i]) / model.rest_lengths[:, None]
-    blocks = model.stiffness[:, None, None] * r[:, :, None] * r[:, None, :]
-    a, b = np.stack([i, j, i, j], axis=1), np.stack([i, j, j, i], axis=1)  # (s, 4) block rows and columns
-    values = blocks[:, None] * np.array([1.0, 1.0, -1.0, -1.0])[None, :, None, None]  # (s, 4, 3, 3)
-    dof = np.arange(3)
-    rows = 3 * a[:, :, None, None] + dof[None, None, :, None]
-    cols = 3 * b[:, :, None, None] + dof[None, None, None, :]
-    rows, cols = np.broadcast_to(rows, values.shape), np.broadcast_to(cols, values.shape)
-    n = 3 * model.node_count
-    return sp.csr_matrix((values.ravel(), (rows.ravel(), cols.ravel())), shape=(n, n))
+    return stiffness_matrix(model)
 
 
 def traction_forces(mesh: TetMesh, tractions) -> np.ndarray:

@@ -32,7 +32,7 @@ from volspring.errors import SpringCollapsed
 from volspring.model import SpringModel
 from volspring.springs import spring_linearization
 
-__all__ = ["BlockPattern", "linearize_springs", "stiffness_times", "rigid_body_modes"]
+__all__ = ["BlockPattern", "linearize_springs", "rigid_body_modes", "stiffness_matrix", "stiffness_times"]
 
 
 class BlockPattern:
@@ -250,6 +250,32 @@ def linearize_springs(pattern, x, v=None, *, stiffness_scale, damping_scale=0.0,
         spring = int(p.spring_order[collapsed.spring])
         raise SpringCollapsed(spring, *p.model.springs[spring]) from None
     return replace(local, forces=local.forces[p.node_rank])
+
+
+def stiffness_matrix(model, x=None, *, free=None, clamp_compression=True) -> sp.csr_matrix:
+    """(3f, 3f) CSR -- the springs' stiffness K = -dF/dx over the free nodes' dofs [N/m].
+
+    Free node k (in the order of ``np.flatnonzero(free)``) owns dofs 3 k, 3 k + 1, 3 k + 2; the
+    couplings to fixed nodes are left out.
+
+    Parameters
+    ----------
+    model : SpringModel
+    x : (n, 3) float, optional -- configuration [m]; default the rest shape
+    free : (n,) bool, optional -- default all nodes
+    clamp_compression : bool -- clamp the transverse term under compression (see ``volspring.springs``)
+
+    Examples
+    --------
+    >>> from volspring import SpringModel
+    >>> pair = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=5.0)
+    >>> stiffness_matrix(pair).toarray()[0]
+    array([ 5.,  0.,  0., -5.,  0.,  0.])
+    """
+    pattern = BlockPattern(model, free, ordering="natural")
+    x = model.rest_positions if x is None else x
+    springs = linearize_springs(pattern, x, stiffness_scale=1.0, clamp_compression=clamp_compression)
+    return pattern.matrix(springs.blocks).tocsr()
 
 
 def stiffness_times(pattern, linearization, u) -> np.ndarray:

@@ -46,6 +46,7 @@ import weakref
 import numpy as np
 import scipy.sparse as sp
 
+from volspring.assembly import stiffness_matrix
 from volspring.errors import StepTooLarge, StepTooLargeWarning
 from volspring.model import SpringModel
 from volspring.scene import Scene
@@ -109,21 +110,9 @@ def omega_max_bound(system, *, x=None) -> float:
 
 
 def _free_stiffness(model, free, x):
-    """(f, f) CSR -- M^-1/2 K M^-1/2 on the f free dofs, assembled from blocks between free nodes only."""
-    blocks = _spring_blocks(model, x)
-    i, j = model.springs.T
-    # The four 3x3 blocks of each spring: +H at (i, i) and (j, j), -H at (i, j) and (j, i).
-    a, b = np.stack([i, j, i, j], axis=1), np.stack([i, j, j, i], axis=1)
-    keep = free[a] & free[b]
-    scale = 1.0 / np.sqrt(model.masses)
-    weight = np.array([1.0, 1.0, -1.0, -1.0]) * scale[a] * scale[b]
-    values = (blocks[:, None] * weight[:, :, None, None])[keep]          # (q, 3, 3)
-    number = np.cumsum(free) - 1                                          # free node -> its index
-    dof = np.arange(3)
-    rows = np.broadcast_to(3 * number[a[keep]][:, None, None] + dof[:, None], values.shape)
-    cols = np.broadcast_to(3 * number[b[keep]][:, None, None] + dof[None, :], values.shape)
-    size = 3 * int(free.sum())
-    return sp.csr_matrix((values.ravel(), (rows.ravel(), cols.ravel())), shape=(size, size))
+    """(f, f) CSR -- M^-1/2 K M^-1/2 on the f free dofs."""
+    scale = sp.diags(np.repeat(1.0 / np.sqrt(model.masses[free]), 3))
+    return (scale @ stiffness_matrix(model, x, free=free) @ scale).tocsr()
 
 
 def omega_max_estimate(system, *, x=None, exact_dofs=EXACT_DOFS) -> float:
