@@ -106,7 +106,7 @@ def test_log_axes_label_major_ticks_only():
 
 @pytest.mark.slow
 def test_full_run_writes_the_three_outputs(tmp_path):
-    """The full run (no --quick), from an empty cache: about 2 minutes on 2 cores."""
+    """The full run (no --quick), from an empty cache: about 90 s on 2 cores."""
     out = tmp_path / "full"
     status = main(["--out", str(out), "--cache", str(tmp_path / "cache"), "--no-progress"])
     assert status == 0

@@ -97,8 +97,8 @@ def _settings(quick: bool) -> dict:
     """What ``--quick`` trims. The speed study runs five periods of the loaded mode with a drag that
     leaves 5e-5 of the motion at the end (a damping ratio of 0.32): its cost is the step count, so
     the full run's finer beam (twice omega_max, half the critical step) gets the same simulated
-    time, not more. Measured on 2 cores: quick about 25 s, full about 2 minutes, most of it the
-    speed study."""
+    time, not more. Measured on 2 cores: quick about 25 s, full about 90 s (three quarters of it the
+    speed study; up to 3 minutes on a shared machine)."""
     if quick:
         return {"refinement_levels": (1, 2), "reference_level": 4, "speed_per_height": 1,
                 "speed_steps": studies.QUICK_INTEGRATOR_STEPS, "speed_periods": 5.0,
