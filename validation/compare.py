@@ -21,10 +21,6 @@ import numpy as np
 from validation import cache
 from validation.cases import Case
 from validation.springs import deformed_volume_change, spring_frequencies, spring_model, spring_static
-# Temporary plain re-exports: validation/studies.py and tests/test_report.py still import effective_constants,
-# held_nodes, spring_frequencies, spring_model and spring_static from validation.compare; their canonical
-# path is validation.springs. Remove this line (and import only what is used above) once they are updated.
-from validation.springs import effective_constants, held_nodes  # noqa: F401
 
 __all__ = [
     "RULES",
