@@ -1,11 +1,22 @@
-"""Time collision detection and consistent penetration depths per step, at about 1k, 10k and 50k tets.
+"""Time collisions per step at about 1k, 10k and 50k tets: detection, depths, penalty forces, Jacobian.
 
-Two Kuhn-split boxes, the second tilted and pushed a third of its width into the first. For each size
-the script prints the colliding points, the time of detection (Teschner et al. 2003) and of the
-consistent depths (Heidelberger et al. 2004), the published figures (Pentium 4 1.8 GHz, 2003:
-detection 4.3 / 30.4 / 70 / 172.5 ms at 1k / 10k / 20k / 50k tets; depths ~35 us per colliding point),
-and, as a yardstick of this machine measured in the same run, the time of one sparse mat-vec with the
-3N x 3N spring-stiffness pattern of the same N nodes.
+Two Kuhn-split unit boxes, the second tilted and pushed a third of its width into the first, as two
+bodies of one spring model (:func:`volspring.collision.assemble_bodies`) with a frictional
+:class:`~volspring.collision.ContactForce`. For each size the script prints the colliding points
+(contacts), then, per step:
+
+- ``detect``: vertex-in-tet detection by spatial hashing (Teschner et al. 2003);
+- ``depth``: consistent penetration depths (Heidelberger et al. 2004);
+- ``force``: ``ContactForce.accumulate`` as a scene calls it once per step or stage, i.e. detection,
+  depths, penalty, damping and friction scattered onto the nodes (it includes the two above);
+- ``jacobian``: ``ContactForce.jacobian`` at the same positions (contacts cached): the 5-node blocks
+  assembled into a (3N, 3N) CSR matrix, what implicit Euler adds per step;
+- ``SpMV``: one product with the 3N x 3N spring-stiffness pattern of the same N nodes, measured in the
+  same run as this machine's yardstick, and the step (force + jacobian) in units of it.
+
+Published figures to compare with (Pentium 4 1.8 GHz, 2003): detection 4.3 / 30.4 / 70 / 172.5 ms at
+1k / 10k / 20k / 50k tets ("paper ms": scaled linearly from the nearest published size); depths
+~35 us per colliding point (2004).
 
 Run: ``OMP_NUM_THREADS=1 python benchmarks/bench_collision.py`` (``--sizes 1000 20000`` to choose).
 """
@@ -16,34 +27,25 @@ import argparse
 import time
 
 import numpy as np
-import scipy.sparse as sp
 from scipy.spatial.transform import Rotation
 
-from volspring import TetMesh
-from volspring.collision import CollisionBodies, consistent_penetration_depths, detect_collisions
+from meshing import structured_box
+from volspring import Material
+from volspring.assembly import stiffness_matrix
+from volspring.collision import Body, ContactForce, assemble_bodies, consistent_penetration_depths, detect_collisions
 
 PUBLISHED_DETECTION_MS = {1_000: 4.3, 10_000: 30.4, 20_000: 70.0, 50_000: 172.5}
 
 
-def box_mesh(cells, size) -> TetMesh:
-    """A box split into cells, each into Kuhn's 6 tets (the same split as tests/conftest.py)."""
-    nx, ny, nz = cells
-    grid = np.stack(np.meshgrid(*(np.linspace(0, s, c + 1) for s, c in zip(size, cells)), indexing="ij"), -1)
-    index = np.arange((nx + 1) * (ny + 1) * (nz + 1)).reshape(nx + 1, ny + 1, nz + 1)
-    i, j, k = (a.ravel() for a in np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij"))
-    corner = [index[i + a, j + b, k + c] for a in (0, 1) for b in (0, 1) for c in (0, 1)]
-    paths = [(0, 4, 6, 7), (0, 4, 5, 7), (0, 2, 6, 7), (0, 2, 3, 7), (0, 1, 5, 7), (0, 1, 3, 7)]
-    tets = np.concatenate([np.stack([corner[p] for p in path], axis=1) for path in paths])
-    return TetMesh.oriented(grid.reshape(-1, 3), tets)
-
-
-def scene(total_tets):
+def contact_scene(total_tets):
     """Two unit boxes of about ``total_tets / 2`` tets each, overlapping by a third of their width."""
     n = max(2, round((total_tets / 12) ** (1 / 3)))
-    mesh = box_mesh((n, n, n), (1.0, 1.0, 1.0))
+    mesh = structured_box((n, n, n), (1.0, 1.0, 1.0), pattern="kuhn")
     tilt = Rotation.from_rotvec([0.1, 0.2, 0.05]).as_matrix()
-    second = (mesh.points - 0.5) @ tilt.T + [0.5 + 0.67, 0.55, 0.45]
-    return CollisionBodies((mesh, mesh)), [mesh.points, second]
+    offset = np.array([0.5 + 0.67, 0.55, 0.45]) - tilt @ [0.5, 0.5, 0.5]  # (x - 0.5) R^T + c = x R^T + offset
+    material = Material(E=1e5, nu=0.3, density=1000.0)
+    system = assemble_bodies([Body(mesh, material), Body(mesh, material, rotation=tilt, translation=offset)])
+    return system, ContactForce(system, friction=0.3)
 
 
 def best_time(function, repeat):
@@ -56,41 +58,40 @@ def best_time(function, repeat):
     return min(times), result
 
 
-def spmv_time(bodies, repeat):
-    """One product with the 3N x 3N matrix of 3x3 blocks on the diagonal and on every tet edge [s]."""
-    edges = bodies.edges
-    n = bodies.node_count
-    rows = np.concatenate([edges[:, 0], edges[:, 1], np.arange(n)])
-    cols = np.concatenate([edges[:, 1], edges[:, 0], np.arange(n)])
-    pattern = sp.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n, n))
-    matrix = sp.kron(pattern, np.ones((3, 3)), format="csr")
-    vector = np.ones(3 * n)
-    matrix @ vector  # warm up
-    return best_time(lambda: matrix @ vector, repeat * 20)[0], matrix.nnz
-
-
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[1_000, 10_000, 50_000], help="total tets")
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per size (the best is kept)")
     args = parser.parse_args(argv)
-    print(f"{'tets':>7} {'nodes':>7} {'colliding':>9} {'detect ms':>9} {'paper ms':>8} {'depth ms':>8} "
-          f"{'us/point':>8} {'step ms':>8} {'SpMV ms':>8} {'step/SpMV':>9}")
+    print(f"{'tets':>7} {'nodes':>7} {'contacts':>8} {'detect ms':>9} {'paper ms':>8} {'depth ms':>8} "
+          f"{'force ms':>8} {'jacobian ms':>11} {'us/contact':>10} {'SpMV ms':>8} {'step/SpMV':>9}")
+    rng = np.random.default_rng(0)
     for size in args.sizes:
-        bodies, positions = scene(size)
-        x = bodies.stack_positions(positions)
-        detect_collisions(bodies, x)  # warm caches (edges, faces, adjacency are built once per scene)
-        detect, contacts = best_time(lambda: detect_collisions(bodies, x), args.repeat)
-        depth, depths = best_time(lambda: consistent_penetration_depths(bodies, x, contacts), args.repeat)
-        spmv, _ = spmv_time(bodies, args.repeat)
+        system, contact = contact_scene(size)
+        bodies = system.collision_bodies
+        x = np.array(system.model.rest_positions)
+        v = rng.normal(scale=0.1, size=x.shape)
+        out = np.zeros_like(x)
+
+        def force():
+            contact._cache = None  # detect afresh, as at every new step or stage
+            contact.accumulate(x, v, 0.0, out)
+            return contact.contacts(x)
+
+        found = force()  # warm caches (edges, faces, adjacency are built once per scene)
+        detect, hits = best_time(lambda: detect_collisions(bodies, x), args.repeat)
+        depth, _ = best_time(lambda: consistent_penetration_depths(bodies, x, hits), args.repeat)
+        forces, _ = best_time(force, args.repeat)
+        jacobian, _ = best_time(lambda: contact.jacobian(x, v, 0.0), args.repeat)
+        matrix, vector = stiffness_matrix(system.model), np.ones(3 * system.model.node_count)
+        spmv, _ = best_time(lambda: matrix @ vector, 20 * args.repeat)
         nearest = min(PUBLISHED_DETECTION_MS, key=lambda t: abs(np.log(t / bodies.tet_count)))
         paper = PUBLISHED_DETECTION_MS[nearest] * bodies.tet_count / nearest  # linear in tets, as published
-        step = detect + depth
-        print(f"{bodies.tet_count:>7} {bodies.node_count:>7} {depths.count:>9} {1e3 * detect:>9.2f} {paper:>8.1f} "
-              f"{1e3 * depth:>8.2f} {1e6 * depth / max(depths.count, 1):>8.1f} {1e3 * step:>8.2f} "
-              f"{1e3 * spmv:>8.3f} {step / spmv:>9.0f}")
-    print("paper ms: Teschner et al. 2003 detection time scaled linearly from the nearest published size; "
-          "their depth cost was ~35 us per colliding point (2004).")
+        step = forces + jacobian
+        print(f"{bodies.tet_count:>7} {bodies.node_count:>7} {found.count:>8} {1e3 * detect:>9.2f} {paper:>8.1f} "
+              f"{1e3 * depth:>8.2f} {1e3 * forces:>8.2f} {1e3 * jacobian:>11.2f} "
+              f"{1e6 * step / max(found.count, 1):>10.1f} {1e3 * spmv:>8.3f} {step / spmv:>9.0f}")
+    print("force = detection + depths + penalty/damping/friction; step = force + jacobian")
     return 0
 
 

@@ -10,6 +10,7 @@ from meshing.anchoring import Anchor, anchor
 from meshing.quality import QualitySummary, min_dihedral_angles, quality_summary, radius_ratios
 from meshing.shapes import Shape, box, cylinder, ellipsoid, parse_shape, sphere, torus
 from meshing.shells import add_shells
+from meshing.structured import structured_box
 from meshing.surface import SurfaceError, load_surface
 from meshing.tetrahedralize import tetrahedralize
 
@@ -29,6 +30,7 @@ __all__ = [
     "quality_summary",
     "radius_ratios",
     "sphere",
+    "structured_box",
     "tetrahedralize",
     "torus",
 ]

@@ -127,10 +127,10 @@ def test_full_run_writes_the_three_outputs(tmp_path):
 
 @pytest.fixture
 def beam_file(tmp_path):
-    from validation.beams import box_mesh
+    from meshing import structured_box
 
     path = tmp_path / "beam.vtu"
-    box_mesh((4, 1, 1), (1.0, 0.25, 0.25)).write(path)
+    structured_box((4, 1, 1), (1.0, 0.25, 0.25)).write(path)
     return path
 
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from validation.beams import box_mesh
+from meshing import structured_box
 from validation.boundary import Box, Traction
 from validation.cases import (CASE_NAMES, build_case, check_held, hanging_bar, own_mesh_case, parse_region,
                               uniaxial_compression)
@@ -19,14 +19,14 @@ def cache_folder(tmp_path):
     return tmp_path / "fem-cache"
 
 
-def test_box_mesh_counts_and_volume():
-    mesh = box_mesh((4, 3, 2), (2.0, 1.5, 1.0))
+def test_structured_box_counts_and_volume():
+    mesh = structured_box((4, 3, 2), (2.0, 1.5, 1.0))
     assert mesh.node_count == 5 * 4 * 3
     assert mesh.tet_count == 6 * 4 * 3 * 2
     assert mesh.volume == pytest.approx(3.0, rel=1e-12)  # exact up to round-off
-    assert box_mesh((4, 3, 2), (2.0, 1.5, 1.0), pattern="kuhn").node_count == mesh.node_count
+    assert structured_box((4, 3, 2), (2.0, 1.5, 1.0), pattern="kuhn").node_count == mesh.node_count
     with pytest.raises(ValueError, match="pattern"):
-        box_mesh((1, 1, 1), (1, 1, 1), pattern="diagonal")
+        structured_box((1, 1, 1), (1, 1, 1), pattern="diagonal")
 
 
 @pytest.mark.parametrize("name", [n for n in CASE_NAMES if n != "own_mesh"])
@@ -49,7 +49,7 @@ def test_mirrored_mesh_removes_the_sideways_sway_of_springs():
     sway = {}
     for pattern in ("mirrored", "kuhn"):
         case = hanging_bar(per_width=2)
-        mesh = box_mesh(case.cells, (0.1, 0.1, 1.0), pattern=pattern)
+        mesh = structured_box(case.cells, (0.1, 0.1, 1.0), pattern=pattern)
         case = type(case)(**{**case.__dict__, "mesh": mesh, "tip_nodes": Box.plane("z", 0.0)(mesh.points)})
         u = spring_static(case, spring_model(mesh, case.material, "van_gelder")).displacement[case.tip_nodes]
         sway[pattern] = np.abs(u[:, :2].mean(axis=0)).max() / abs(u[:, 2].mean())
@@ -67,7 +67,7 @@ def test_newton_and_linearised_spring_solves_agree_at_small_deformation():
 
 
 def test_rest_stiffness_has_the_rigid_motions_as_null_space():
-    mesh = box_mesh((2, 2, 2), (1.0, 1.0, 1.0))
+    mesh = structured_box((2, 2, 2), (1.0, 1.0, 1.0))
     K = rest_stiffness_matrix(spring_model(mesh, Material(1e6, 0.3, 1000.0), "van_gelder"))
     x = mesh.points - mesh.points.mean(axis=0)
     motions = [np.tile(np.eye(3)[c], (mesh.node_count, 1)) for c in range(3)]
@@ -79,7 +79,7 @@ def test_rest_stiffness_has_the_rigid_motions_as_null_space():
 
 
 def test_traction_forces_total_the_load():
-    mesh = box_mesh((3, 2, 2), (1.0, 0.2, 0.1))
+    mesh = structured_box((3, 2, 2), (1.0, 0.2, 0.1))
     forces = traction_forces(mesh, [Traction(Box.plane("x", 1.0), (0.0, 0.0, -500.0))])
     np.testing.assert_allclose(forces.sum(axis=0), [0.0, 0.0, -500.0 * 0.2 * 0.1], rtol=1e-12)
     assert np.count_nonzero(np.abs(forces).sum(axis=1)) == 3 * 3  # only the 9 nodes of the face x = 1
@@ -97,7 +97,7 @@ def test_spring_frequency_of_one_spring():
 
 @pytest.mark.parametrize("rule", RULES)
 def test_cauchy_limit_one_effective_nu_whatever_is_asked(rule):
-    mesh = box_mesh((3, 3, 3), (1.0, 1.0, 1.0))
+    mesh = structured_box((3, 3, 3), (1.0, 1.0, 1.0))
     measured = {nu: effective_constants(mesh, spring_model(mesh, Material(1e6, nu, 1000.0), rule))
                 for nu in (0.3, 0.45)}
     # The rules use E only: the same network, the same nu, to round-off.
@@ -110,7 +110,7 @@ def test_cauchy_limit_one_effective_nu_whatever_is_asked(rule):
 
 
 def test_uniform_rule_uses_the_mean_van_gelder_constant():
-    mesh = box_mesh((2, 1, 1), (1.0, 0.5, 0.5))
+    mesh = structured_box((2, 1, 1), (1.0, 0.5, 0.5))
     material = Material(1e6, 0.3, 1000.0)
     model = spring_model(mesh, material, "uniform")
     assert np.allclose(model.stiffness, uniform_stiffness(mesh, material))
@@ -132,7 +132,7 @@ def test_compression_uses_the_linear_solve_and_fem_matches_the_closed_form(cache
 
 
 def test_parse_region_forms():
-    mesh = box_mesh((2, 2, 2), (2.0, 1.0, 1.0))
+    mesh = structured_box((2, 2, 2), (2.0, 1.0, 1.0))
     assert parse_region("xmax", mesh)(mesh.points).sum() == 9
     assert parse_region("x < 0.5", mesh)(mesh.points).sum() == 9
     assert parse_region("z>0.9", mesh)(mesh.points).sum() == 9
@@ -143,7 +143,7 @@ def test_parse_region_forms():
 
 
 def test_own_mesh_errors():
-    mesh = box_mesh((4, 1, 1), (1.0, 0.25, 0.25))
+    mesh = structured_box((4, 1, 1), (1.0, 0.25, 0.25))
     material = Material(1e6, 0.3, 1000.0)
     with pytest.raises(ValueError, match="contains no mesh node"):
         own_mesh_case(mesh, parse_region("x<-1", mesh), material=material)

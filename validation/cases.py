@@ -47,13 +47,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from validation import analytic
-from validation.beams import beam_cells, box_mesh
+from meshing import structured_box
 from validation.boundary import Box, Clamp, Traction
 from volspring.material import Material
 from volspring.mesh import TetMesh
 
 __all__ = [
     "BEAM",
+    "beam_cells",
     "CASE_NAMES",
     "BeamGeometry",
     "Case",
@@ -146,7 +147,7 @@ class Case:
 
 def _beam(per_height: int, **changes) -> tuple:
     cells = beam_cells(BEAM["length_m"], BEAM["height_m"], per_height, width=BEAM["width_m"])
-    mesh = box_mesh(cells, (BEAM["length_m"], BEAM["width_m"], BEAM["height_m"]))
+    mesh = structured_box(cells, (BEAM["length_m"], BEAM["width_m"], BEAM["height_m"]))
     geometry = BeamGeometry(BEAM["length_m"], BEAM["width_m"], BEAM["height_m"])
     material = Material(E=BEAM["E_pa"], nu=changes.get("nu", BEAM["nu"]), density=BEAM["density_kg_per_m3"])
     tip = Box.plane("x", BEAM["length_m"])(mesh.points)
@@ -210,7 +211,7 @@ def hanging_bar(*, per_width: int = 2) -> Case:
     _check_level(per_width)
     length, width = BAR["length_m"], BAR["width_m"]
     cells = (per_width, per_width, max(1, round(length / (width / per_width))))
-    mesh = box_mesh(cells, (width, width, length))
+    mesh = structured_box(cells, (width, width, length))
     material = Material(E=BAR["E_pa"], nu=BAR["nu"], density=BAR["density_kg_per_m3"])
     g = BAR["gravity_m_per_s2"]
     elongation = analytic.hanging_bar_elongation(length, E=material.E, density=material.density, gravity=g)
@@ -228,7 +229,7 @@ def uniaxial_compression(*, cells: int = 4, nu: float = 0.3, strain: float = CUB
     """A cube on sliding symmetry planes, its face x = edge moved to axial ``strain`` (< 0 compresses)."""
     _check_level(cells)
     edge = CUBE["edge_m"]
-    mesh = box_mesh((cells, cells, cells), (edge, edge, edge))
+    mesh = structured_box((cells, cells, cells), (edge, edge, edge))
     material = Material(E=CUBE["E_pa"], nu=nu, density=CUBE["density_kg_per_m3"])
     clamps = (Clamp(Box.plane("x", 0.0), components="x"), Clamp(Box.plane("y", 0.0), components="y"),
               Clamp(Box.plane("z", 0.0), components="z"),
@@ -427,3 +428,22 @@ def build_case(name: str, *, quick: bool = False, nu: float | None = None) -> Ca
     if name == "own_mesh":
         raise ValueError("the own_mesh case needs a mesh: use own_mesh_case (volspring-validate --mesh FILE)")
     raise ValueError(f"unknown case {name!r}; known: {', '.join(CASE_NAMES)}")
+
+
+def beam_cells(length: float, height: float, per_height: int, *, width: float | None = None) -> tuple:
+    """Cells ``(nx, ny, nz)`` of a beam ``length x width x height`` with ``per_height`` cells across
+    its height and cubic cells as near as the lengths allow.
+
+    Parameters
+    ----------
+    length, height : float -- [m]
+    per_height : int -- cells across the height (>= 1)
+    width : float, optional -- [m]; default ``height``
+
+    Returns
+    -------
+    (3,) tuple of int
+    """
+    width = height if width is None else width
+    cell = height / per_height
+    return (max(1, round(length / cell)), max(1, round(width / cell)), int(per_height))

@@ -25,9 +25,9 @@ The comparison with the FEM reference is :mod:`validation.compare`.
 Examples
 --------
 >>> from volspring import Material
->>> from validation.beams import box_mesh
+>>> from meshing import structured_box
 >>> from validation.springs import effective_constants, spring_model
->>> cube = box_mesh((3, 3, 3), (1.0, 1.0, 1.0))
+>>> cube = structured_box((3, 3, 3), (1.0, 1.0, 1.0))
 >>> material = Material(E=1e6, nu=0.3, density=1000.0)
 >>> network = effective_constants(cube, spring_model(cube, material, "van_gelder"))
 >>> round(network["E_pa"] / material.E, 2), round(network["nu"], 2)   # not the 1 and 0.3 asked

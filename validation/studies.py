@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from validation import cache
-from validation.beams import box_mesh
+from meshing import structured_box
 from validation.cases import cantilever_gravity
 from validation.compare import RULES, tip_deflection
 from validation.springs import effective_constants, held_nodes, spring_frequencies, spring_model, spring_static
@@ -336,7 +336,7 @@ def cauchy_study(*, cells: int = 4, rules=RULES, nus=(0.0, 0.25, 0.3, 0.45, 0.49
     nus : sequence of float -- the Poisson ratios asked of the material
     E : float -- Young's modulus asked [Pa]
     strain : float -- axial strain of the test [-]
-    patterns : sequence of str -- mesh patterns (:func:`validation.beams.box_mesh`)
+    patterns : sequence of str -- mesh patterns (:func:`meshing.structured_box`)
 
     Returns
     -------
@@ -346,7 +346,7 @@ def cauchy_study(*, cells: int = 4, rules=RULES, nus=(0.0, 0.25, 0.3, 0.45, 0.49
     """
     measurements, summary = [], {}
     for pattern in patterns:
-        mesh = box_mesh((cells,) * 3, (1.0, 1.0, 1.0), pattern=pattern)
+        mesh = structured_box((cells,) * 3, (1.0, 1.0, 1.0), pattern=pattern)
         for rule in rules:
             values = []
             for nu in nus:

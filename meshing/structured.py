@@ -1,4 +1,4 @@
-"""Structured box meshes for the validation cases: a grid of cells, each split into six tets.
+"""Structured box meshes: a grid of cells, each split into six tets (tests, benchmarks, validation cases).
 
 Every cell of an ``nx x ny x nz`` grid is cut into Kuhn's six tets around one of its diagonals,
 so the mesh has exactly ``(nx + 1)(ny + 1)(nz + 1)`` nodes; the box spans
@@ -16,8 +16,8 @@ so the mesh has exactly ``(nx + 1)(ny + 1)(nz + 1)`` nodes; the box spans
 
 Examples
 --------
->>> from validation.beams import box_mesh
->>> mesh = box_mesh((10, 1, 1), (1.0, 0.1, 0.1))
+>>> from meshing import structured_box
+>>> mesh = structured_box((10, 1, 1), (1.0, 0.1, 0.1))
 >>> mesh.node_count, mesh.tet_count, round(mesh.volume, 12)
 (44, 60, 0.01)
 """
@@ -28,13 +28,13 @@ import numpy as np
 
 from volspring.mesh import TetMesh
 
-__all__ = ["KUHN_PATHS", "box_mesh", "beam_cells"]
+__all__ = ["KUHN_PATHS", "structured_box"]
 
 #: Kuhn's six tets of a cell, as corner numbers a*4 + b*2 + c of the corner (a, b, c) in {0, 1}^3.
 KUHN_PATHS = ((0, 4, 6, 7), (0, 4, 5, 7), (0, 2, 6, 7), (0, 2, 3, 7), (0, 1, 5, 7), (0, 1, 3, 7))
 
 
-def box_mesh(cells, size, *, origin=(0.0, 0.0, 0.0), pattern: str = "mirrored") -> TetMesh:
+def structured_box(cells, size, *, origin=(0.0, 0.0, 0.0), pattern: str = "mirrored") -> TetMesh:
     """A box of ``cells`` grid cells, six Kuhn tets per cell.
 
     Parameters
@@ -74,22 +74,3 @@ def box_mesh(cells, size, *, origin=(0.0, 0.0, 0.0), pattern: str = "mirrored") 
               for a in (0, 1) for b in (0, 1) for c in (0, 1)]
     tets = np.concatenate([np.stack([corner[p] for p in path], axis=1) for path in KUHN_PATHS])
     return TetMesh.oriented(points, tets)
-
-
-def beam_cells(length: float, height: float, per_height: int, *, width: float | None = None) -> tuple:
-    """Cells ``(nx, ny, nz)`` of a beam ``length x width x height`` with ``per_height`` cells across
-    its height and cubic cells as near as the lengths allow.
-
-    Parameters
-    ----------
-    length, height : float -- [m]
-    per_height : int -- cells across the height (>= 1)
-    width : float, optional -- [m]; default ``height``
-
-    Returns
-    -------
-    (3,) tuple of int
-    """
-    width = height if width is None else width
-    cell = height / per_height
-    return (max(1, round(length / cell)), max(1, round(width / cell)), int(per_height))
