@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from volspring import Gravity, Material, Pins, Scene, SpringModel, State
+from volspring import Gravity, Material, Pins, Scene, SpringModel, State, simulate
 from volspring.checkpoint import load_checkpoint, save_checkpoint
+from volspring.integrators import make_integrator
 from volspring.integrators.base import Integrator
 
 from conftest import cube_mesh
@@ -121,10 +122,9 @@ def beam_scene():
 def make(name):
     if name == "test_leapfrog":
         return Leapfrog()
-    integrators = pytest.importorskip("volspring.integrators")
     if name == "implicit_euler":
-        return integrators.make_integrator(name, solver="amg")
-    return integrators.make_integrator(name)
+        return make_integrator(name, solver="amg")
+    return make_integrator(name)
 
 
 # The step is below every explicit limit for this beam (h omega_max ~ 0.3), so no guard interferes.
@@ -158,8 +158,6 @@ def test_a_resumed_run_is_bit_identical(tmp_path, beam_scene, name):
 
 @pytest.mark.parametrize("name", ["symplectic_euler", "verlet", "implicit_euler"])
 def test_a_simulation_resumed_from_its_checkpoint_is_bit_identical(tmp_path, beam_scene, name):
-    simulate_module = pytest.importorskip("volspring.simulate")
-    simulate = simulate_module.simulate
     saved = {}
 
     def keep(frame, state):

@@ -3,45 +3,23 @@
 import numpy as np
 import pytest
 
-from volspring import Gravity, Material, Pins, Scene, SpringModel, State
+from volspring import Gravity, Material, Pins, Scene, SpringModel
 from volspring.constraints import DistanceConstraints, HalfSpace, StrainLimit, constraint_colors
 from volspring.fields import CallableForce
+from volspring.integrators import make_integrator
 from volspring.springs import spring_strains
+from volspring.stability import omega_max_bound
 
 from conftest import cube_mesh
 
-try:  # the real integrators when present; a symplectic Euler written here otherwise
-    from volspring.integrators import make_integrator
-except ImportError:  # pragma: no cover - only while the integrators are not in the tree
-    make_integrator = None
 
 RUBBER = Material(E=1e5, nu=0.3, density=1000.0)
 G = 9.81
 
 
-class InlineSymplecticEuler:
-    """v += h a(x, v); x += h v; then the scene's projections (what Integrator.step does)."""
-
-    def step(self, scene, state, dt):
-        v = state.v + dt * scene.accelerations(state.x, state.v, state.t)
-        x = state.x + dt * v
-        scene.project(x, v, state.x, state.t + dt, dt)
-        return State(x, v, state.t + dt, state.step + 1)
-
-
-def integrator(name):
-    if make_integrator is not None:
-        return make_integrator(name)
-    if name != "symplectic_euler":
-        pytest.skip(f"volspring.integrators is not there yet for {name}")
-    return InlineSymplecticEuler()
-
-
 def stable_step(model, fraction=0.5):
     """A step h with h omega_max <= 2 * fraction, omega_max from Gershgorin's (safe) bound."""
-    k_sum = np.bincount(model.springs.ravel(), weights=np.repeat(model.stiffness, 2), minlength=model.node_count)
-    omega_max = np.sqrt((2.0 * np.sqrt(3.0) * k_sum / model.masses).max())
-    return 2.0 * fraction / omega_max
+    return 2.0 * fraction / omega_max_bound(model)
 
 
 def rope(links, *, length=1.0, stiffness=0.0, mass=0.05, direction=(1.0, 0.0, 0.0)):
@@ -72,7 +50,7 @@ def test_a_dropped_body_never_goes_below_the_plane(name, normal):
     model = SpringModel.from_mesh(cube_mesh((2, 2, 2), size=(0.1, 0.1, 0.1)), RUBBER, damping_ratio=0.05)
     plane = HalfSpace((0.0, 0.0, -0.05), normal, restitution=0.3, friction=0.4)
     scene = Scene(model, forces=[Gravity(model.masses)], obstacles=[plane])
-    stepper, dt = integrator(name), stable_step(model)
+    stepper, dt = make_integrator(name), stable_step(model)
     state = scene.initial_state()
     lowest = []
     for _ in range(int(0.25 / dt)):
@@ -96,7 +74,7 @@ def test_coulomb_friction_on_a_tilted_plane_for_one_particle(ratio):
     scene = Scene(particle, forces=[Gravity(particle.masses)], obstacles=[HalfSpace((0, 0, 0), normal, friction=mu)])
     dt, steps = 1e-3, 400
     state = scene.initial_state()
-    stepper = InlineSymplecticEuler()  # the exact discrete prediction below is symplectic Euler's
+    stepper = make_integrator("symplectic_euler")  # the exact discrete prediction below is symplectic Euler's
     for _ in range(steps):
         state = stepper.step(scene, state, dt)
     travelled = float(state.x[0] @ downhill)
@@ -129,7 +107,7 @@ def test_a_block_slides_iff_tan_angle_exceeds_mu(name, ratio):
 
     scene = Scene(model, forces=[CallableForce(tilting_gravity)],
                   obstacles=[HalfSpace((0, 0, 0), (0, 0, 1), friction=mu)])
-    stepper, dt = integrator(name), stable_step(model)
+    stepper, dt = make_integrator(name), stable_step(model)
     state, marks = scene.initial_state(), {}
     while state.t < 0.5 - dt / 2:
         state = stepper.step(scene, state, dt)
@@ -243,7 +221,7 @@ def test_a_rope_pinned_at_one_end_keeps_its_lengths(name):
     model = rope(10)  # 1 m, 11 beads of 50 g, no springs: the constraints are the rope
     constraints = DistanceConstraints.from_model(model, iterations=10)
     scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins([0]), constraints=[constraints])
-    stepper, dt = integrator(name), 1e-3
+    stepper, dt = make_integrator(name), 1e-3
     state = scene.initial_state()
     worst = 0.0
     for _ in range(200):
@@ -275,7 +253,7 @@ def test_strain_limit_caps_stretch_and_compression(jelly):
 def test_strain_limit_holds_a_soft_hanging_rope_at_one_plus_tau(name):
     tau, tolerance = 0.1, 1e-4
     model = rope(6, stiffness=20.0, direction=(0.0, 0.0, -1.0))  # 7 beads of 50 g on 20 N/m links
-    stepper, dt = integrator(name), stable_step(model)
+    stepper, dt = make_integrator(name), stable_step(model)
     limit = StrainLimit(model, tau, iterations=300, tolerance=tolerance)
     results = {}
     for label, constraints in (("free", []), ("limited", [limit])):
