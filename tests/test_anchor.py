@@ -154,7 +154,7 @@ def test_finer_render_surface_on_a_cube():
 
 def test_real_bunny_surface_anchors_into_its_tet_mesh(bunny, caplog):
     mesh, surface = bunny
-    assert len(surface.vertices) == 502  # the merged surface of ../shared/data/README.md
+    assert len(surface.vertices) == 502  # the merged surface of tests/data/README.md
     with caplog.at_level(logging.INFO, logger="meshing.anchoring"):
         bound = anchor(mesh, surface)
     assert bound.point_count == 502 and (bound.tet_index >= 0).all()

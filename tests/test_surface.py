@@ -17,7 +17,7 @@ def _box():
 def test_bunny_seams_are_merged_and_reported(shared_data, caplog):
     with caplog.at_level(logging.INFO, logger="meshing.surface"):
         surface = load_surface(shared_data / "coarse_bunny.obj")
-    # Figures from ../shared/data/README.md: 502 vertices once positions are merged, genus 0, ~8.37e5.
+    # Figures from tests/data/README.md: 502 vertices once positions are merged, genus 0, ~8.37e5.
     assert len(surface.vertices) == 502 and len(surface.faces) == 1000
     assert surface.is_watertight and surface.is_winding_consistent and surface.euler_number == 2
     assert surface.volume == pytest.approx(8.37e5, rel=1e-3)  # README gives 3 digits
