@@ -66,9 +66,15 @@ def _amg_preconditioner(K, *, rigid_modes, prolongation=None) -> spla.LinearOper
     import pyamg
     from pyamg.relaxation.relaxation import gauss_seidel
 
+    from volspring.solvers import PROLONGATION_OMEGA
+
+    # Gershgorin-weighted prolongation smoothing: no random draw, so the reference is reproducible
+    # bit for bit and the caller's global random state untouched (volspring.solvers explains).
+    smooth = ("jacobi", {"omega": PROLONGATION_OMEGA, "weighting": "local"})
     if prolongation is None:
-        return pyamg.smoothed_aggregation_solver(K, B=rigid_modes).aspreconditioner(cycle="V")
-    coarse = pyamg.smoothed_aggregation_solver((prolongation.T @ K @ prolongation).tocsr(), B=rigid_modes)
+        return pyamg.smoothed_aggregation_solver(K, B=rigid_modes, smooth=smooth).aspreconditioner(cycle="V")
+    coarse = pyamg.smoothed_aggregation_solver((prolongation.T @ K @ prolongation).tocsr(), B=rigid_modes,
+                                               smooth=smooth)
 
     def apply(residual):
         residual = np.asarray(residual, dtype=float).ravel()
