@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-__all__ = ["SimulationDiverged", "SpringCollapsed", "StepTooLarge", "StepTooLargeWarning", "SolverNotConverged"]
+__all__ = ["SimulationDiverged", "SpringCollapsed", "StepTooLarge", "StepTooLargeWarning", "SolverNotConverged",
+           "TetsInvertedWarning"]
 
 
 class SimulationDiverged(FloatingPointError):
@@ -27,6 +28,10 @@ class SpringCollapsed(FloatingPointError):
 
 class StepTooLargeWarning(RuntimeWarning):
     """An explicit integrator was asked to step beyond its stability limit (``guard="warn"``)."""
+
+
+class TetsInvertedWarning(RuntimeWarning):
+    """Tets of the body turned inside out during a run (once per run, naming how many and the worst)."""
 
 
 class StepTooLarge(ValueError):

@@ -50,12 +50,13 @@ from __future__ import annotations
 
 import logging
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
-from volspring.diagnostics import angular_momentum, linear_momentum
-from volspring.errors import SimulationDiverged
+from volspring.diagnostics import angular_momentum, linear_momentum, tet_inversion
+from volspring.errors import SimulationDiverged, TetsInvertedWarning
 from volspring.integrators import Integrator, make_integrator
 from volspring.scene import Scene, State
 from volspring.springs import spring_energy
@@ -83,6 +84,9 @@ class SimulationResult:
     kinetic_energy, potential_energy, total_energy : (f,) float -- [J]
     linear_momentum : (f, 3) float -- [kg m/s]
     angular_momentum : (f, 3) float -- about the centre of mass [kg m^2/s]
+    inverted_tets : (f,) int -- tets turned inside out (signed volume <= 0) at each frame
+    worst_volume_ratio : (f,) float -- smallest V / V_rest over the tets at each frame [-]
+        (NaN for a model without tets)
     steps_taken : int -- steps taken by this run
     stopped_early : bool -- the callback returned False
     """
@@ -95,6 +99,8 @@ class SimulationResult:
     total_energy: np.ndarray
     linear_momentum: np.ndarray
     angular_momentum: np.ndarray
+    inverted_tets: np.ndarray
+    worst_volume_ratio: np.ndarray
     steps_taken: int
     stopped_early: bool
 
@@ -272,7 +278,7 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
 
     monitor = _EnergyMonitor(scene, state, energy_limit=energy_limit, runaway_factor=runaway_factor,
                              runaway_checks=runaway_checks)
-    records = {key: [] for key in ("time", "step", "kinetic", "potential", "linear", "angular")}
+    records = {key: [] for key in ("time", "step", "kinetic", "potential", "linear", "angular", "inverted", "ratio")}
     frame_index = 0
     slack = _FRAME_SLACK * dt
 
@@ -285,6 +291,15 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
         records["potential"].append(potential)
         records["linear"].append(linear_momentum(scene, current))
         records["angular"].append(angular_momentum(scene, current))
+        inversion = tet_inversion(scene, current.x)
+        if inversion.count and not any(records["inverted"]):
+            message = (f"{inversion.count} of {inversion.tet_count} tets are inverted at t = {current.t:.6g} s "
+                       f"(worst volume ratio {inversion.worst_volume_ratio:.3g}): springs do not resist "
+                       "inversion; a stiffer material, smaller loads or smaller steps keep tets the right way out")
+            logger.warning(message)
+            warnings.warn(message, TetsInvertedWarning, stacklevel=3)
+        records["inverted"].append(inversion.count)
+        records["ratio"].append(inversion.worst_volume_ratio)
         keep_going = True if callback is None else callback(frame_index, current) is not False
         frame_index += 1
         return keep_going
@@ -313,4 +328,5 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
         total_energy=np.array(records["kinetic"]) + np.array(records["potential"]),
         linear_momentum=np.array(records["linear"]).reshape(-1, 3),
         angular_momentum=np.array(records["angular"]).reshape(-1, 3),
+        inverted_tets=np.array(records["inverted"], dtype=np.int64), worst_volume_ratio=np.array(records["ratio"]),
         steps_taken=taken, stopped_early=stopped)
