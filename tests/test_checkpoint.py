@@ -84,8 +84,33 @@ def test_load_refuses_what_is_not_a_checkpoint(tmp_path):
     with pytest.raises(ValueError, match="lacks .*__manifest__"):
         load_checkpoint(tmp_path / "other.npz")
     (tmp_path / "garbage.npz").write_bytes(b"not a zip file")
-    with pytest.raises(ValueError, match="cannot read"):
+    with pytest.raises(ValueError, match="garbage.npz is not a readable checkpoint: it is not a complete .npz"):
         load_checkpoint(tmp_path / "garbage.npz")
+
+
+def _saved(tmp_path):
+    rng = np.random.default_rng(3)
+    state = State(rng.standard_normal((400, 3)), rng.standard_normal((400, 3)), t=0.5, step=5,
+                  memory={"x_previous": rng.standard_normal((400, 3))})
+    return save_checkpoint(tmp_path / "run.npz", state)
+
+
+@pytest.mark.filterwarnings("error::ResourceWarning")  # no file handle left open either
+@pytest.mark.parametrize("damage", ["truncated", "flipped bytes", "empty"])
+def test_a_damaged_checkpoint_is_one_clear_error_naming_the_file(tmp_path, damage):
+    path = _saved(tmp_path)
+    data = bytearray(path.read_bytes())
+    if damage == "truncated":
+        data = data[: len(data) // 2]  # a copy cut short, or a disk that filled up
+    elif damage == "flipped bytes":
+        middle = len(data) // 3  # inside the stored x array: the zip's CRC no longer matches
+        data[middle:middle + 16] = bytes(255 - b for b in data[middle:middle + 16])
+    else:
+        data = bytearray()
+    path.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match=r"run.npz is not a readable checkpoint") as caught:
+        load_checkpoint(path)
+    assert "\n" not in str(caught.value)
 
 
 # ---------------------------------------------------------------------- resumed runs
@@ -172,3 +197,36 @@ def test_a_simulation_resumed_from_its_checkpoint_is_bit_identical(tmp_path, bea
     part = simulate(beam_scene, make(name), duration=(STEPS - 20) * DT, dt=DT, frame_dt=10 * DT,
                     state=load_checkpoint(tmp_path / "frame.npz"))
     assert_bit_identical(part.state, final)
+
+
+def _run_scene(E=1e6, pins=True):
+    model = SpringModel.from_mesh(cube_mesh((3, 1, 1), (0.3, 0.1, 0.1)), Material(E, 0.3, 1000.0), damping_ratio=0.05)
+    held = Pins(np.flatnonzero(model.rest_positions[:, 0] < 1e-9)) if pins else None
+    return Scene(model, forces=[Gravity(model.masses)], pins=held)
+
+
+def test_a_checkpoint_refuses_another_run_naming_what_differs(tmp_path):
+    from volspring.checkpoint import CheckpointMismatch
+
+    scene, integrator = _run_scene(), make_integrator("implicit_euler")
+    state = integrator.step(scene, scene.initial_state(), 0.01)
+    path = save_checkpoint(tmp_path / "run.npz", state, scene=scene, integrator=integrator, dt=0.01)
+    resumed = load_checkpoint(path, scene=_run_scene(), integrator=make_integrator("implicit_euler"), dt=0.01)
+    assert_bit_identical(resumed, state)  # the same run resumes
+    with pytest.raises(CheckpointMismatch, match=r"written with dt = 0.01 s; this run asks for dt = 0.02 s"):
+        load_checkpoint(path, dt=0.02)
+    with pytest.raises(CheckpointMismatch, match="written with integrator implicit_euler; this run uses verlet"):
+        load_checkpoint(path, integrator=make_integrator("verlet"))
+    from volspring.integrators.implicit import ImplicitEuler
+    with pytest.raises(CheckpointMismatch, match=r"newton_iterations = 0 \(now 2\)"):
+        load_checkpoint(path, integrator=ImplicitEuler(newton_iterations=2))
+    with pytest.raises(CheckpointMismatch, match=r"another model: its stiffness, damping differ \(another"):
+        load_checkpoint(path, scene=_run_scene(E=2e6))  # another --E: stiffer springs, other dampers
+    with pytest.raises(CheckpointMismatch, match="its pinned nodes differ"):
+        load_checkpoint(path, scene=_run_scene(pins=False))
+
+
+def test_a_run_record_needs_all_three(tmp_path):
+    scene = _run_scene()
+    with pytest.raises(ValueError, match="got only scene"):
+        save_checkpoint(tmp_path / "run.npz", scene.initial_state(), scene=scene)

@@ -11,10 +11,14 @@ Key scheme of the archive:
     ``memory["solver"]["guess"]`` is stored as ``memory/solver/guess``. Memory keys must
     therefore be strings without ``/``;
 ``__manifest__``
-    a JSON string recording the format version and the Python type of every memory entry
+    a JSON string recording the format version, the Python type of every memory entry
     (array, numpy scalar, float, int, bool, str, None, dict), so that a loaded memory has the
     same types as the saved one: ``3`` comes back an int, ``np.float32(3)`` a float32 scalar,
-    an empty dict an empty dict.
+    an empty dict an empty dict; and, when saved with the run's scene, integrator and step
+    (format version 2), ``run``: the step ``dt``, the integrator's name and options, and a
+    fingerprint of the model (SHA-256 of its rest positions, springs, rest lengths, stiffness,
+    damping, masses and pinned nodes), so that :func:`load_checkpoint` refuses to resume another
+    model, another integrator or another step, naming what differs.
 
 Arrays are stored with their dtype and values unchanged (npz is lossless), so a run resumed
 from a checkpoint takes bit-identical steps to the run that saved it. The file is written to a
@@ -23,9 +27,12 @@ temporary name and renamed: a crash while saving leaves the previous checkpoint 
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import logging
+import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -33,15 +40,64 @@ import numpy as np
 from volspring._io import atomic_path
 from volspring.scene import State
 
-__all__ = ["save_checkpoint", "load_checkpoint"]
+__all__ = ["save_checkpoint", "load_checkpoint", "CheckpointMismatch", "model_fingerprint"]
 
 logger = logging.getLogger(__name__)
 
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2
+_READABLE_VERSIONS = (1, 2)  # version 1: no run record (nothing to check a resume against)
+
+# What each fingerprinted part of a model says about how it was made (for the refusal message).
+_FINGERPRINT_PARTS = {
+    "rest positions": "the mesh or its placement",
+    "springs": "the mesh or its shells",
+    "rest lengths": "the mesh",
+    "stiffness": "E, the stiffness rule or the raw stiffness",
+    "damping": "the damping ratio or damping",
+    "masses": "the density or the mesh",
+    "pinned nodes": "the pins",
+}
+
+
+class CheckpointMismatch(ValueError):
+    """A checkpoint was written by another run than the one asking to resume from it."""
 _SEPARATOR = "/"
 
 
-def save_checkpoint(path, state: State) -> Path:
+def model_fingerprint(scene) -> dict:
+    """Short SHA-256 digests of everything that makes a scene's model and supports what they are.
+
+    Parameters
+    ----------
+    scene : Scene
+
+    Returns
+    -------
+    dict -- part name ("rest positions", "springs", "rest lengths", "stiffness", "damping",
+        "masses", "pinned nodes") -> 16 hex digits of the SHA-256 of its bytes (dtype and shape
+        included), so equal digests mean bit-identical data
+    """
+    model = scene.model
+    pins = np.zeros(0, dtype=np.int64) if scene.pins is None else scene.pins.nodes
+    arrays = {"rest positions": model.rest_positions, "springs": model.springs, "rest lengths": model.rest_lengths,
+              "stiffness": model.stiffness, "damping": model.damping, "masses": model.masses, "pinned nodes": pins}
+    digests = {}
+    for name, array in arrays.items():
+        array = np.ascontiguousarray(array)
+        digest = hashlib.sha256(f"{array.dtype.str}{array.shape}".encode())
+        digest.update(array.tobytes())
+        digests[name] = digest.hexdigest()[:16]
+    return digests
+
+
+def _integrator_record(integrator) -> dict:
+    """The integrator's name and its scalar options (public attributes), to compare on resume."""
+    options = {key: value for key, value in sorted(vars(integrator).items())
+               if not key.startswith("_") and key != "last_solve" and isinstance(value, (bool, int, float, str))}
+    return {"name": integrator.name, "options": options}
+
+
+def save_checkpoint(path, state: State, *, scene=None, integrator=None, dt=None) -> Path:
     """Save a state (with its integrator memory) to an ``.npz`` file, atomically.
 
     Parameters
@@ -49,6 +105,9 @@ def save_checkpoint(path, state: State) -> Path:
     path : path-like -- the file to write; parent folders are created
     state : State -- x (n, 3) [m], v (n, 3) [m/s], t [s], step, and ``memory``: a dict of numpy
         arrays, numpy scalars, Python floats, ints, bools, strings, None, or nested dicts of these
+    scene, integrator, dt : optional -- the run that wrote the state (all three or none): recorded
+        so that :func:`load_checkpoint` can refuse to resume it with another model, integrator
+        or step
 
     Returns
     -------
@@ -79,6 +138,13 @@ def save_checkpoint(path, state: State) -> Path:
         "step": np.asarray(state.step, dtype=np.int64),
     }
     manifest = {"version": CHECKPOINT_VERSION, "memory": _flatten(state.memory, "memory", arrays)}
+    given = [value is not None for value in (scene, integrator, dt)]
+    if any(given) and not all(given):
+        raise ValueError("save_checkpoint records a run with scene, integrator and dt together; got only "
+                         + ", ".join(name for name, ok in zip(("scene", "integrator", "dt"), given) if ok))
+    if all(given):
+        manifest["run"] = {"dt": float(dt), "integrator": _integrator_record(integrator),
+                           "fingerprint": model_fingerprint(scene)}
     for name in ("x", "v"):
         if arrays[name].dtype == object:
             raise TypeError(f"state.{name} has dtype object; expected a numeric (n, 3) array")
@@ -92,12 +158,14 @@ def save_checkpoint(path, state: State) -> Path:
     return path
 
 
-def load_checkpoint(path) -> State:
-    """Load a state saved by :func:`save_checkpoint`.
+def load_checkpoint(path, *, scene=None, integrator=None, dt=None) -> State:
+    """Load a state saved by :func:`save_checkpoint`, checking it belongs to the run resuming it.
 
     Parameters
     ----------
     path : path-like
+    scene, integrator, dt : optional -- the run about to resume; each one given is compared with
+        what the checkpoint recorded (a checkpoint saved without a run record is not checked)
 
     Returns
     -------
@@ -108,28 +176,73 @@ def load_checkpoint(path) -> State:
     FileNotFoundError
         If there is no file at ``path``.
     ValueError
-        If the file is not a volspring checkpoint or was written by a newer format version.
+        If the file is not a readable volspring checkpoint (truncated, corrupt, another kind of
+        file) or was written by a newer format version; the message names the file.
+    CheckpointMismatch
+        If it was written with another step, integrator or model (naming what differs).
     """
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no checkpoint file at {path}")
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path} is not a readable checkpoint: it is not a complete .npz (zip) archive "
+                         "(truncated, or another kind of file)")
     try:
-        archive = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as error:
-        raise ValueError(f"cannot read {path} as a checkpoint (.npz): {error}") from error
-    with archive:
-        missing = {"x", "v", "t", "step", "__manifest__"} - set(archive.files)
-        if missing:
-            raise ValueError(f"{path} is not a volspring checkpoint: it lacks {', '.join(sorted(missing))}")
-        manifest = json.loads(str(archive["__manifest__"]))
-        if manifest.get("version") != CHECKPOINT_VERSION:
-            raise ValueError(f"{path} has checkpoint format version {manifest.get('version')!r}; "
-                             f"this volspring reads version {CHECKPOINT_VERSION}")
-        x, v = archive["x"], archive["v"]
-        if x.ndim != 2 or x.shape[1:] != (3,) or v.shape != x.shape:
-            raise ValueError(f"{path}: x and v must have the same shape (n, 3), got {x.shape} and {v.shape}")
-        memory = _unflatten(manifest["memory"], "memory", archive)
-        return State(x, v, t=float(archive["t"]), step=int(archive["step"]), memory=memory)
+        with np.load(path, allow_pickle=False) as archive:
+            state, manifest = _read(path, archive)
+    except (OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error, json.JSONDecodeError,
+            UnicodeDecodeError) as error:
+        raise ValueError(f"{path} is not a readable checkpoint (truncated or corrupt?): "
+                         f"{type(error).__name__}: {error}") from error
+    except ValueError as error:
+        if str(path) in str(error):
+            raise
+        raise ValueError(f"{path} is not a readable checkpoint (truncated or corrupt?): {error}") from error
+    _check_run(path, manifest.get("run"), scene, integrator, dt)
+    return state
+
+
+def _read(path, archive):
+    missing = {"x", "v", "t", "step", "__manifest__"} - set(archive.files)
+    if missing:
+        raise ValueError(f"{path} is not a volspring checkpoint: it lacks {', '.join(sorted(missing))}")
+    manifest = json.loads(str(archive["__manifest__"]))
+    if manifest.get("version") not in _READABLE_VERSIONS:
+        raise ValueError(f"{path} has checkpoint format version {manifest.get('version')!r}; "
+                         f"this volspring reads versions {', '.join(map(str, _READABLE_VERSIONS))}")
+    x, v = archive["x"], archive["v"]
+    if x.ndim != 2 or x.shape[1:] != (3,) or v.shape != x.shape:
+        raise ValueError(f"{path}: x and v must have the same shape (n, 3), got {x.shape} and {v.shape}")
+    memory = _unflatten(manifest["memory"], "memory", archive)
+    return State(x, v, t=float(archive["t"]), step=int(archive["step"]), memory=memory), manifest
+
+
+def _check_run(path, run, scene, integrator, dt) -> None:
+    """Refuse a resume by another run than the one that wrote the checkpoint, naming what differs."""
+    if run is None:
+        return
+    if dt is not None and float(dt) != run["dt"]:
+        raise CheckpointMismatch(f"{path} was written with dt = {run['dt']:.17g} s; this run asks for "
+                                 f"dt = {float(dt):.17g} s (a resumed run keeps the step of the run it continues)")
+    if integrator is not None:
+        mine = _integrator_record(integrator)
+        if mine != run["integrator"]:
+            theirs = run["integrator"]
+            if mine["name"] != theirs["name"]:
+                what = f"integrator {theirs['name']}; this run uses {mine['name']}"
+            else:
+                changed = sorted(key for key in set(mine["options"]) | set(theirs["options"])
+                                 if mine["options"].get(key) != theirs["options"].get(key))
+                what = (f"{theirs['name']} options " + ", ".join(
+                    f"{key} = {theirs['options'].get(key)!r} (now {mine['options'].get(key)!r})" for key in changed))
+            raise CheckpointMismatch(f"{path} was written with {what}")
+    if scene is not None:
+        mine = model_fingerprint(scene)
+        differ = [name for name in _FINGERPRINT_PARTS if mine.get(name) != run["fingerprint"].get(name)]
+        if differ:
+            causes = sorted({_FINGERPRINT_PARTS[name] for name in differ})
+            raise CheckpointMismatch(f"{path} was written for another model: its {', '.join(differ)} differ "
+                                     f"(another {'; '.join(causes)}?)")
 
 
 def _flatten(memory, prefix, arrays) -> dict:
