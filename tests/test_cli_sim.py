@@ -87,9 +87,11 @@ def test_divergence_is_one_line_and_leaves_complete_frames(tmp_path, capsys, bea
                            "--dt", "1e-3", "--frame-dt", "1e-3", "--duration", "1", "--guard", "off",
                            "--out", tmp_path, "--no-progress")
     assert status == 3
+    # One error line, last; before it at most the one-line warning that tets turned inside out.
     lines = err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith("volspring-sim: error: simulation diverged at step ")
-    assert "worst node" in lines[0] and "complete frame(s)" in lines[0]
+    assert lines[-1].startswith("volspring-sim: error: simulation diverged at step ")
+    assert all(line.startswith("volspring-sim: warning: ") and "tets are inverted" in line for line in lines[:-1])
+    assert len(lines) <= 2 and "worst node" in lines[-1] and "complete frame(s)" in lines[-1]
     entries = read_pvd(tmp_path / "frame.pvd")
     assert entries and all(np.isfinite(meshio.read(file).points).all() for _, file in entries)
     assert sorted(p.name for p in tmp_path.glob("frame_0*.vtu")) == [file.name for _, file in entries]
@@ -186,3 +188,58 @@ def test_render_surface_is_anchored_in_file_order(tmp_path, capsys, beam_file):
     np.testing.assert_array_equal(samples[0], vertices.astype(np.float32))  # frame 0 is the rest shape
     status, _, err = run(capsys, beam_file, "--render-surface", surface, "--out", out_dir)
     assert status == 1 and "--render-surface needs --blender" in err
+
+
+def test_nu_given_to_a_pure_spring_rule_says_it_is_ignored(tmp_path, capsys, beam_file):
+    status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--nu", "0.3", "--quiet")
+    assert status == 0
+    assert err == ("volspring-sim: warning: --nu 0.3 is ignored by --rule van_gelder: pure springs have one effective "
+                   "Poisson ratio whatever nu is asked (the Cauchy limit; volspring-validate cauchy measures it)\n")
+    # Nobody asked for a nu: no warning.
+    assert run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--quiet") == (0, "", "")
+
+
+def test_the_summary_reports_inverted_tets(tmp_path, capsys, beam_file):
+    status, out, _ = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--no-progress")
+    assert status == 0 and "tets: 0 of 24 inverted at the end, at most 0 at a frame; worst volume ratio" in out
+
+
+def test_resume_with_another_run_is_refused_naming_what_differs(tmp_path, capsys, beam_file):
+    common = [beam_file, *PIN_END, *FAST, "--quiet", "--out", tmp_path]
+    assert run(capsys, *common, "--duration", "0.01", "--checkpoint-every", "1")[0] == 0
+    checkpoint = tmp_path / "checkpoint.npz"
+    for extra, message in [
+        (["--E", "2e6"], "was written for another model: its stiffness, damping differ"),
+        (["--density", "900"], "its damping, masses differ"),
+        (["--pin", "-1,-1,-1,0.06,1,1"], "its pinned nodes differ"),
+        (["--dt", "0.0025"], r"written with dt = 0.005 s; this run asks for dt = 0.0025 s"),
+        (["--integrator", "verlet"], "written with integrator implicit_euler; this run uses verlet"),
+        (["--newton-iterations", "2"], r"newton_iterations = 0 \(now 2\)"),
+    ]:
+        argv = [*common[:1], *(common[1:3] if "--pin" not in extra else []), *common[3:], "--duration", "0.02",
+                "--resume", checkpoint, *extra]
+        status, _, err = run(capsys, *argv)
+        assert status == 1 and len(err.splitlines()) == 1, err
+        assert re.search(message, err), err
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--newton-iterations", "-1"], "--newton-iterations = -1 is not >= 0"),
+    (["--newton-iterations", "2", "--integrator", "verlet"], "--newton-iterations applies to --integrator implicit_euler"),
+    (["--runaway-factor", "0"], r"--runaway-factor = 0 is not > 0"),
+])
+def test_solver_knobs_refuse_nonsense(capsys, beam_file, argv, message):
+    status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", *argv)
+    assert status == 1 and re.search(message, err), err
+
+
+def test_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, beam_file, monkeypatch):
+    import volspring.cli
+
+    target = tmp_path / "taken.txt"
+    target.write_text("not a folder")
+    monkeypatch.setattr(volspring.cli, "_load_mesh", lambda args: pytest.fail("meshed before checking --out"))
+    status, _, err = run(capsys, beam_file, "--out", target)
+    assert status == 1 and f"--out {target} is an existing file; expected a folder" in err
+    status, _, err = run(capsys, beam_file, "--out", target / "below")
+    assert status == 1 and f"{target} is a file, so the folder cannot be made" in err

@@ -198,6 +198,9 @@ def load_checkpoint(path, *, scene=None, integrator=None, dt=None) -> State:
         if str(path) in str(error):
             raise
         raise ValueError(f"{path} is not a readable checkpoint (truncated or corrupt?): {error}") from error
+    if scene is not None and state.x.shape[0] != scene.model.node_count:
+        raise CheckpointMismatch(f"{path} holds {state.x.shape[0]} nodes, the model has {scene.model.node_count}; "
+                                 "resume with the mesh and model of the run that wrote it")
     _check_run(path, manifest.get("run"), scene, integrator, dt)
     return state
 
@@ -222,8 +225,8 @@ def _check_run(path, run, scene, integrator, dt) -> None:
     if run is None:
         return
     if dt is not None and float(dt) != run["dt"]:
-        raise CheckpointMismatch(f"{path} was written with dt = {run['dt']:.17g} s; this run asks for "
-                                 f"dt = {float(dt):.17g} s (a resumed run keeps the step of the run it continues)")
+        raise CheckpointMismatch(f"{path} was written with dt = {run['dt']!r} s; this run asks for "
+                                 f"dt = {float(dt)!r} s (a resumed run keeps the step of the run it continues)")
     if integrator is not None:
         mine = _integrator_record(integrator)
         if mine != run["integrator"]:

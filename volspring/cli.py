@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 import warnings
@@ -38,6 +39,9 @@ SURFACE_NAME = "surface"
 # Relative tolerance of pin boxes: a box face placed on a row of nodes catches them despite round-off.
 PIN_TOLERANCE = 1e-9
 EXIT_INPUT, EXIT_USAGE, EXIT_DIVERGED = 1, 2, 3
+DEFAULT_NU = 0.45
+# Stiffness rules that build pure springs: they take E, never nu (README: the limit of pure springs).
+NU_IGNORING_RULES = ("van_gelder", "lloyd", "uniform")
 VECTOR_OPTIONS = ("--pin", "--gravity")  # comma-separated numbers that may start with a minus sign
 
 
@@ -62,6 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``volspring-sim``."""
     from volspring.integrators import INTEGRATORS
     from volspring.model import STIFFNESS_RULES
+    from volspring.simulate import RUNAWAY_CHECKS, RUNAWAY_FACTOR
 
     parser = _Parser(prog=PROG, description="Simulate a volumetric soft body as a tetrahedral mass-spring model.",
                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -74,7 +79,10 @@ def build_parser() -> argparse.ArgumentParser:
     body.add_argument("--mesher", choices=("gmsh", "delaunay"), default="gmsh", help="mesher for a built-in shape")
     body.add_argument("--seed", type=int, help="random seed of the mesher")
     body.add_argument("--E", type=float, default=1e6, help="Young's modulus [Pa] (soft rubber)")
-    body.add_argument("--nu", type=float, default=0.45, help="Poisson's ratio [-]")
+    body.add_argument("--nu", type=float, default=None,
+                      help=f"Poisson's ratio [-] (default {DEFAULT_NU}); the spring rules ignore it: pure springs have "
+                           "one effective Poisson ratio whatever nu is asked (the Cauchy limit), and say so when "
+                           "--nu is given")
     body.add_argument("--density", type=float, default=1100.0, help="density [kg/m^3]")
     body.add_argument("--rule", choices=STIFFNESS_RULES, default="van_gelder", help="spring stiffness rule")
     body.add_argument("--stiffness", type=float, help="the raw spring constant of --rule uniform [N/m]")
@@ -91,6 +99,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--frame-dt", type=float, default=0.04, help="time between frames [s]")
     run.add_argument("--guard", choices=("warn", "raise", "off"), default="warn",
                      help="what a step beyond an explicit integrator's stability limit does")
+    run.add_argument("--newton-iterations", type=int, default=0, metavar="N",
+                     help="implicit_euler: Newton iterations on the nonlinear step after the linearised one "
+                          "(0: Baraff-Witkin); more follow large rotations more closely at large --dt")
+    run.add_argument("--runaway-factor", type=float, default=None, metavar="F",
+                     help="divergence check: the run has diverged when its energy exceeds the start energy plus "
+                          "the work of forces and moving pins by more than F times the start's energy scale and "
+                          f"keeps growing over {RUNAWAY_CHECKS} checks (default {RUNAWAY_FACTOR:g}); 'inf' turns the "
+                          "energy check off (NaN and Inf are always caught)")
     output = parser.add_argument_group("output")
     output.add_argument("--out", type=Path, metavar="DIR",
                         help=f"write the frames there ({SERIES_NAME}.pvd: tets, {SERIES_NAME}_springs.pvd: springs)")
@@ -102,7 +118,10 @@ def build_parser() -> argparse.ArgumentParser:
     output.add_argument("--checkpoint-every", type=int, metavar="N",
                         help=f"save {CHECKPOINT_NAME} in DIR every N frames and at the end")
     output.add_argument("--resume", type=Path, metavar="CHECKPOINT",
-                        help="continue a run from its checkpoint (same INPUT and options) up to --duration")
+                        help="continue a run from its checkpoint up to --duration; the checkpoint records the "
+                             "model, integrator and --dt of its run, and a resume with another INPUT, material, "
+                             "pins, integrator or --dt is refused, naming what differs (a resumed run is "
+                             "bit-identical to one that never stopped)")
     output.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                         help="progress bar on stderr (default: when stderr is a terminal)")
     output.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary")
@@ -120,7 +139,9 @@ def main(argv=None) -> int:
     except SystemExit as done:  # --help
         return done.code if isinstance(done.code, int) else 0
     try:
-        return _run(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning  # one line each, on stderr, from the first check on
+            return _run(args)
     except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
         return _fail(error, EXIT_DIVERGED)
     except (_InputError, ValueError, OSError, SolverNotConverged, Warning) as error:
@@ -155,19 +176,18 @@ def _run(args) -> int:
     from volspring.simulate import simulate
 
     _check_numbers(args)
+    _check_output(args)
     started = time.perf_counter()
     mesh, origin = _load_mesh(args)
     model = _build_model(args, mesh)
     scene = _build_scene(args, model)
-    integrator = make_integrator(args.integrator)
+    integrator = make_integrator(args.integrator, **({"newton_iterations": args.newton_iterations}
+                                                     if args.newton_iterations else {}))
 
     state, first_frame = scene.initial_state(), 0
     total_steps = max(int(math.ceil(args.duration / args.dt - 1e-9)), 0)
     if args.resume is not None:
-        state = load_checkpoint(args.resume)
-        if state.x.shape != (model.node_count, 3):
-            raise _InputError(f"the checkpoint {args.resume} holds {len(state.x)} nodes, the model has "
-                              f"{model.node_count}; resume with the INPUT and meshing options of the first run")
+        state = load_checkpoint(args.resume, scene=scene, integrator=integrator, dt=args.dt)
         if state.step >= total_steps:
             raise _InputError(f"the checkpoint {args.resume} is at step {state.step} (t = {state.t:.6g} s), "
                               f"already at --duration {args.duration:g} s ({total_steps} steps)")
@@ -177,6 +197,7 @@ def _run(args) -> int:
     remaining = total_steps - state.step
 
     writers = _writers(args, model, first_frame)
+    checks = {} if args.runaway_factor is None else {"runaway_factor": args.runaway_factor}
     progress = _Progress(enabled=_progress_enabled(args), start=state.t, end=state.t + remaining * args.dt)
     last = {"frames": 0, "state": state}
 
@@ -184,16 +205,14 @@ def _run(args) -> int:
         for writer in writers:
             writer(frame_index, current)
         if args.checkpoint_every and frame_index and frame_index % args.checkpoint_every == 0:
-            save_checkpoint(args.out / CHECKPOINT_NAME, current)
+            save_checkpoint(args.out / CHECKPOINT_NAME, current, scene=scene, integrator=integrator, dt=args.dt)
         last["frames"] += 1
         last["state"] = current
         progress.update(current.t, first_frame + frame_index)
 
     try:
-        with warnings.catch_warnings():
-            warnings.showwarning = _show_warning
-            result = simulate(scene, integrator, duration=remaining * args.dt, dt=args.dt, state=state,
-                              frame_dt=args.frame_dt, callback=on_frame, guard=args.guard)
+        result = simulate(scene, integrator, duration=remaining * args.dt, dt=args.dt, state=state,
+                          frame_dt=args.frame_dt, callback=on_frame, guard=args.guard, **checks)
     except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
         progress.close()
         kept = ""
@@ -204,7 +223,7 @@ def _run(args) -> int:
     finally:
         progress.close()
     if args.checkpoint_every:
-        save_checkpoint(args.out / CHECKPOINT_NAME, result.state)
+        save_checkpoint(args.out / CHECKPOINT_NAME, result.state, scene=scene, integrator=integrator, dt=args.dt)
     if not args.quiet:
         _summary(args, origin, mesh, model, scene, integrator, result, first_frame, time.perf_counter() - started)
     return 0
@@ -232,6 +251,26 @@ def _check_numbers(args) -> None:
         raise _InputError("--rule uniform needs --stiffness (the raw spring constant [N/m])")
     if args.damping_ratio < 0 or not math.isfinite(args.damping_ratio):
         raise _InputError(f"--damping-ratio = {args.damping_ratio:g} is not a finite number >= 0")
+    if args.newton_iterations < 0:
+        raise _InputError(f"--newton-iterations = {args.newton_iterations} is not >= 0")
+    if args.newton_iterations and args.integrator != "implicit_euler":
+        raise _InputError(f"--newton-iterations applies to --integrator implicit_euler, not {args.integrator}")
+    if args.runaway_factor is not None and not args.runaway_factor > 0:
+        raise _InputError(f"--runaway-factor = {args.runaway_factor:g} is not > 0 ('inf' turns the check off)")
+
+
+def _check_output(args) -> None:
+    """Refuse an output location that cannot be a folder before any work is done."""
+    if args.out is None:
+        return
+    out = args.out
+    if out.exists() and not out.is_dir():
+        raise _InputError(f"--out {out} is an existing file; expected a folder (new or one of an earlier run)")
+    parent = next((folder for folder in (out, *out.parents) if folder.exists()), None)
+    if parent is not None and not parent.is_dir():
+        raise _InputError(f"--out {out}: {parent} is a file, so the folder cannot be made")
+    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
+        raise _InputError(f"--out {out}: cannot write in {parent} (permission denied)")
 
 
 def _load_mesh(args):
@@ -273,7 +312,11 @@ def _build_model(args, mesh):
     from volspring.material import Material
     from volspring.model import SpringModel
 
-    material = Material(E=args.E, nu=args.nu, density=args.density)
+    material = Material(E=args.E, nu=DEFAULT_NU if args.nu is None else args.nu, density=args.density)
+    if args.nu is not None and args.rule in NU_IGNORING_RULES:
+        warnings.warn(f"--nu {args.nu:g} is ignored by --rule {args.rule}: pure springs have one effective Poisson "
+                      "ratio whatever nu is asked (the Cauchy limit; volspring-validate cauchy measures it)",
+                      UserWarning, stacklevel=2)
     return SpringModel.from_mesh(mesh, material, rule=args.rule, stiffness=args.stiffness,
                                  damping_ratio=args.damping_ratio)
 
@@ -426,6 +469,8 @@ def _summary(args, origin, mesh, model, scene, integrator, result, first_frame, 
         f"in {seconds:.2f} s wall time",
         f"end: max displacement {displacement.max():.6g} m (node {int(displacement.argmax())}), "
         f"kinetic energy {result.kinetic_energy[-1]:.6g} J, total energy {result.total_energy[-1]:.6g} J",
+        f"tets: {result.inverted_tets[-1]} of {mesh.tet_count} inverted at the end, at most "
+        f"{result.inverted_tets.max()} at a frame; worst volume ratio {np.nanmin(result.worst_volume_ratio):.3g}",
     ]
     if args.out is not None:
         lines.append(f"output: {first_frame + result.frame_count} frame(s) in {args.out} "
