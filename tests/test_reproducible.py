@@ -97,3 +97,58 @@ def test_fem_amg_reference_ignores_the_global_generator():
         answers.append(solve_static(mesh, (1e6, 0.3, 1e3), clamp=clamp, gravity=(0, 0, -9.81), element="P1",
                                     solver="amg").displacement)
     assert answers[0].tobytes() == answers[1].tobytes()
+
+
+# ---------------------------------------------------------------------- through the command line
+@pytest.fixture(scope="module")
+def big_beam_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("mesh") / "beam.vtu"
+    cube_mesh((40, 9, 9), (1.0, 0.2, 0.2)).write(path)  # 4,100 nodes
+    return path
+
+
+SIM = ["--pin", "-1,-1,-1,0,1,1", "--dt", "0.01", "--frame-dt", "0.02", "--duration", "0.3", "--quiet"]
+
+
+def _final(folder):
+    from volspring.checkpoint import load_checkpoint
+
+    return load_checkpoint(folder / "checkpoint.npz")
+
+
+def test_two_cli_runs_write_bit_identical_checkpoints(tmp_path, big_beam_file):
+    from volspring.cli import main
+
+    for name, seed in (("a", 1), ("b", 2)):
+        np.random.seed(seed)
+        assert main([str(big_beam_file), *SIM, "--out", str(tmp_path / name), "--checkpoint-every", "1"]) == 0
+    first, second = _final(tmp_path / "a"), _final(tmp_path / "b")
+    assert first.step == 30
+    assert first.x.tobytes() == second.x.tobytes() and first.v.tobytes() == second.v.tobytes()
+
+
+def test_killed_and_resumed_cli_run_equals_an_uninterrupted_one(tmp_path, big_beam_file):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from volspring.cli import main
+
+    assert main([str(big_beam_file), *SIM, "--out", str(tmp_path / "whole"), "--checkpoint-every", "1"]) == 0
+    killed = tmp_path / "killed"
+    process = subprocess.Popen([sys.executable, "-m", "volspring.cli", str(big_beam_file), *SIM, "--out", str(killed),
+                                "--checkpoint-every", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 120
+    while not (killed / "checkpoint.npz").exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    process.send_signal(signal.SIGKILL)  # no chance to clean up: the hardest interruption
+    process.wait()
+    stopped_at = _final(killed).step
+    assert 0 < stopped_at < 30, "the kill came too late to test a resume"
+    status = main([str(big_beam_file), *SIM, "--out", str(killed), "--resume", str(killed / "checkpoint.npz")
+                   , "--checkpoint-every", "1"])
+    assert status == 0
+    whole, resumed = _final(tmp_path / "whole"), _final(killed)
+    assert resumed.step == whole.step == 30
+    assert resumed.x.tobytes() == whole.x.tobytes() and resumed.v.tobytes() == whole.v.tobytes()
