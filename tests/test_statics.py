@@ -105,3 +105,19 @@ def test_singular_problems_raise():
 def test_too_few_iterations_raise_with_the_residual():
     with pytest.raises(SolverNotConverged, match=r"residual [0-9.e-]+"):
         solve_static(pinned_beam(1e6), max_iterations=1)
+
+
+def test_stiff_bodies_converge_to_the_roundoff_floor():
+    # At E = 1e12 Pa the sag is 1e-9 of the beam's size, and the spring forces cannot be summed more
+    # finely than eps * k * l0: rtol = 1e-8 of the load was unreachable and the solve was called failed.
+    mesh = cube_mesh((10, 2, 2), (1.0, 0.1, 0.1))
+    sags = {}
+    for E in (1e9, 1e12):
+        model = SpringModel.from_mesh(mesh, Material(E, 0.3, 1000.0))
+        scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+        result = solve_static(scene)
+        sags[E] = float((result.x - model.rest_positions)[:, 2].min())
+    # Linear elasticity: the sag scales as 1/E. At E = 1e9 the strain is 1e-5, so geometric
+    # nonlinearity moves the product by about that; the round-off floor at 1e12 is about 1e-5 of
+    # the load. 1e-3 is far above both and far below any real error (a wrong answer is O(1)).
+    assert sags[1e12] * 1e12 == pytest.approx(sags[1e9] * 1e9, rel=1e-3)
