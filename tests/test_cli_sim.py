@@ -243,3 +243,34 @@ def test_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, beam_fi
     assert status == 1 and f"--out {target} is an existing file; expected a folder" in err
     status, _, err = run(capsys, beam_file, "--out", target / "below")
     assert status == 1 and f"{target} is a file, so the folder cannot be made" in err
+
+
+@pytest.mark.parametrize("signal_name, status", [("SIGTERM", 143), ("SIGINT", 130)])
+def test_an_interrupted_run_says_where_it_stopped_in_one_line(tmp_path, signal_name, status):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    mesh = tmp_path / "beam.vtu"
+    cube_mesh((20, 5, 5), size=(1.0, 0.2, 0.2)).write(mesh)
+    out = tmp_path / "out"
+    argv = [str(mesh), *PIN_END, "--dt", "0.01", "--frame-dt", "0.01", "--duration", "100", "--out", str(out),
+            "--checkpoint-every", "1", "--no-progress"]
+    process = subprocess.Popen([sys.executable, "-m", "volspring.cli", *argv], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not (out / "checkpoint.npz").exists() and process.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    time.sleep(0.2)  # well into the stepping, frames being written
+    process.send_signal(getattr(signal, signal_name))
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == status, stderr
+    lines = stderr.splitlines()
+    assert len(lines) == 1 and "Traceback" not in stderr, stderr
+    assert re.match(rf"volspring-sim: interrupted by {signal_name}.* at t = [\d.]+ s \(step \d+\); the last checkpoint "
+                    rf"is {re.escape(str(out / 'checkpoint.npz'))} at t = [\d.]+ s; resume with: volspring-sim ",
+                    lines[0]), lines[0]
+    assert lines[0].endswith(f"--resume {out / 'checkpoint.npz'}")
+    assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary file left
+    assert load_checkpoint(out / "checkpoint.npz").step > 0

@@ -7,7 +7,8 @@ stderr and a summary on stdout. A fuller scene format is for a later version.
 
 Exit status: 0 success, 1 bad input or failed run (one ``volspring-sim: error: ...`` line on
 stderr), 2 bad command line, 3 the simulation diverged (the output folder then holds only the
-complete frames before it).
+complete frames before it), 130 Ctrl-C and 143 SIGTERM (129 SIGHUP): one line saying where the
+run stopped, its last checkpoint and the command that resumes it; no traceback, no temporary file.
 
 Examples
 --------
@@ -23,6 +24,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import shlex
 import sys
 import time
 import warnings
@@ -138,14 +140,42 @@ def main(argv=None) -> int:
         return _fail(error, EXIT_USAGE)
     except SystemExit as done:  # --help
         return done.code if isinstance(done.code, int) else 0
+    from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
+
+    progress = _RunProgress()
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), handle_termination():
             warnings.showwarning = _show_warning  # one line each, on stderr, from the first check on
-            return _run(args)
+            return _run(args, progress)
     except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
         return _fail(error, EXIT_DIVERGED)
     except (_InputError, ValueError, OSError, SolverNotConverged, Warning) as error:
         return _fail(error, EXIT_INPUT)
+    except (KeyboardInterrupt, Interrupted) as stop:  # Ctrl-C, SIGTERM, SIGHUP: one line, no traceback
+        argv = sys.argv[1:] if argv is None else [str(token) for token in argv]
+        print(f"{PROG}: interrupted by {interruption_name(stop)}{progress.describe(argv)}", file=sys.stderr)
+        return exit_status(stop)
+
+
+class _RunProgress:
+    """Where a run has got to, for the line printed when it is interrupted."""
+
+    def __init__(self):
+        self.state = None
+        self.checkpoint = None  # (path, t) of the last checkpoint written
+
+    def describe(self, argv) -> str:
+        if self.state is None:
+            return " before the first step; nothing to resume"
+        text = f" at t = {self.state.t:.6g} s (step {self.state.step})"
+        if self.checkpoint is None:
+            return text + "; no checkpoint was written (--checkpoint-every N makes a run resumable)"
+        path, t = self.checkpoint
+        kept = [token for index, token in enumerate(argv)
+                if token != "--resume" and (index == 0 or argv[index - 1] != "--resume")
+                and not token.startswith("--resume=")]
+        resume = shlex.join([PROG, *kept, "--resume", str(path)])
+        return f"{text}; the last checkpoint is {path} at t = {t:.6g} s; resume with: {resume}"
 
 
 def _joined_vectors(argv) -> list:
@@ -170,7 +200,7 @@ def _fail(message, status) -> int:
 
 
 # ---------------------------------------------------------------------- steps of a run
-def _run(args) -> int:
+def _run(args, status: _RunProgress) -> int:
     from volspring.checkpoint import load_checkpoint, save_checkpoint
     from volspring.integrators import make_integrator
     from volspring.simulate import simulate
@@ -188,6 +218,7 @@ def _run(args) -> int:
     total_steps = max(int(math.ceil(args.duration / args.dt - 1e-9)), 0)
     if args.resume is not None:
         state = load_checkpoint(args.resume, scene=scene, integrator=integrator, dt=args.dt)
+        status.checkpoint = (args.resume, state.t)
         if state.step >= total_steps:
             raise _InputError(f"the checkpoint {args.resume} is at step {state.step} (t = {state.t:.6g} s), "
                               f"already at --duration {args.duration:g} s ({total_steps} steps)")
@@ -206,8 +237,9 @@ def _run(args) -> int:
             writer(frame_index, current)
         if args.checkpoint_every and frame_index and frame_index % args.checkpoint_every == 0:
             save_checkpoint(args.out / CHECKPOINT_NAME, current, scene=scene, integrator=integrator, dt=args.dt)
+            status.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
         last["frames"] += 1
-        last["state"] = current
+        last["state"] = status.state = current
         progress.update(current.t, first_frame + frame_index)
 
     try:

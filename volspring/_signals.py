@@ -1,0 +1,158 @@
+"""Termination signals as exceptions, so that a stopped command cleans up like an interrupted one.
+
+By default SIGTERM (``kill PID``, a job scheduler's or a container's stop) and SIGHUP (the
+terminal closed) end a Python process on the spot: no ``finally`` block runs, temporary files
+stay behind, a run folder's manifest still says "running". Inside :func:`handle_termination`
+they raise :class:`Terminated` instead, which unwinds like Ctrl-C's ``KeyboardInterrupt``:
+:func:`volspring._io.atomic_path` removes its temporary file, a
+:class:`volspring.output.RunFolder` is marked interrupted, and the command exits with the
+conventional status 128 + signal number (:func:`exit_status`: 143 for SIGTERM, 129 for SIGHUP,
+130 for Ctrl-C).
+
+Both exceptions derive from ``BaseException``, not ``Exception``, so a handler written for
+errors (``except Exception``) does not swallow them.
+
+Examples
+--------
+>>> import os, signal
+>>> from volspring._signals import Terminated, exit_status, handle_termination
+>>> try:
+...     with handle_termination():
+...         os.kill(os.getpid(), signal.SIGTERM)
+... except Terminated as stop:
+...     print(stop.signal_name, exit_status(stop))
+SIGTERM 143
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import signal
+import threading
+
+__all__ = ["Interrupted", "Terminated", "exit_status", "handle_termination", "interruption_name"]
+
+logger = logging.getLogger(__name__)
+
+#: The signals turned into :class:`Terminated` (those this platform has).
+TERMINATION_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+class Interrupted(BaseException):
+    """The process was asked to stop by a signal.
+
+    Parameters
+    ----------
+    signum : int
+        The signal number.
+
+    Attributes
+    ----------
+    signum : int
+        The signal number.
+    signal_name : str
+        Its name, such as ``"SIGTERM"``.
+    exit_status : int
+        The status a command conventionally exits with: 128 + ``signum`` (143 for SIGTERM).
+    """
+
+    def __init__(self, signum: int):
+        self.signum = int(signum)
+        try:
+            self.signal_name = signal.Signals(self.signum).name
+        except ValueError:
+            self.signal_name = f"signal {self.signum}"
+        self.exit_status = 128 + self.signum
+        super().__init__(f"interrupted by {self.signal_name}")
+
+
+class Terminated(Interrupted):
+    """A termination signal (SIGTERM or SIGHUP) arrived inside :func:`handle_termination`."""
+
+
+def exit_status(interruption: BaseException) -> int:
+    """The conventional exit status for an interruption: 128 + the signal number.
+
+    Parameters
+    ----------
+    interruption : Interrupted or KeyboardInterrupt
+
+    Returns
+    -------
+    int
+        ``interruption.exit_status`` for an :class:`Interrupted`; 130 (128 + SIGINT) for a
+        ``KeyboardInterrupt``.
+
+    Raises
+    ------
+    TypeError
+        For any other exception.
+    """
+    if isinstance(interruption, Interrupted):
+        return interruption.exit_status
+    if isinstance(interruption, KeyboardInterrupt):
+        return 128 + int(signal.SIGINT)
+    raise TypeError(f"{type(interruption).__name__} is not an interruption (expected Interrupted or "
+                    "KeyboardInterrupt)")
+
+
+def interruption_name(interruption: BaseException) -> str:
+    """``"SIGTERM"``, ``"SIGHUP"``, ... for an :class:`Interrupted`; ``"SIGINT (Ctrl-C)"`` for a ``KeyboardInterrupt``."""
+    if isinstance(interruption, Interrupted):
+        return interruption.signal_name
+    if isinstance(interruption, KeyboardInterrupt):
+        return "SIGINT (Ctrl-C)"
+    raise TypeError(f"{type(interruption).__name__} is not an interruption (expected Interrupted or "
+                    "KeyboardInterrupt)")
+
+
+@contextlib.contextmanager
+def handle_termination(signals=TERMINATION_SIGNALS):
+    """Within the block, a termination signal raises :class:`Terminated` in the main thread.
+
+    Parameters
+    ----------
+    signals : sequence of int, optional
+        The signals to turn into :class:`Terminated`; default SIGTERM and SIGHUP.
+
+    Yields
+    ------
+    None
+
+    Notes
+    -----
+    - The first signal raises; further ones arriving while the exception unwinds are ignored, so
+      that a second ``kill`` does not cut the clean-up short (SIGKILL still ends the process).
+    - A signal whose disposition is "ignore" when the block starts (``nohup`` ignores SIGHUP) stays
+      ignored.
+    - The handlers in place before the block are restored when it ends, however it ends.
+    - Python delivers signals to the main thread only: called from another thread this does
+      nothing (the block runs with the handlers as they are).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        logger.debug("handle_termination outside the main thread: signals are left as they are")
+        yield
+        return
+    raised = []
+
+    def handler(signum, frame):
+        if raised:  # already unwinding: let the clean-up finish
+            logger.debug("ignoring %s: already stopping", signal.Signals(signum).name)
+            return
+        raised.append(signum)
+        raise Terminated(signum)
+
+    previous = {}
+    try:
+        for signum in signals:
+            before = signal.getsignal(signum)
+            if before == signal.SIG_IGN:
+                continue
+            previous[signum] = before
+            signal.signal(signum, handler)
+        yield
+    finally:
+        for signum, before in previous.items():
+            # getsignal returns None for a handler not installed from Python: restore the default then.
+            signal.signal(signum, signal.SIG_DFL if before is None else before)
