@@ -4,14 +4,18 @@ Examples
 --------
 ``volspring-mesh box:1,0.1,0.1 -o beam.vtu --size 0.025``
 ``volspring-mesh bunny.obj -o bunny.msh --size 0.005 --method delaunay --seed 1 --shells 2 --shell-thickness 0.002``
+``volspring-mesh bunny_in_mm.stl --units mm -o bunny.vtu --size 5``  (5 mm tets; the mesh is written in metres)
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import math
+import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 __all__ = ["main"]
@@ -31,43 +35,68 @@ class _Parser(argparse.ArgumentParser):
 def _parser() -> argparse.ArgumentParser:
     from meshing.shapes import SHAPE_NAMES
     from meshing.tetrahedralize import METHODS
+    from volspring.units import add_unit_arguments
 
     parser = _Parser(prog=PROG, description="Fill a closed surface or a built-in shape with tetrahedra.")
     parser.add_argument("input", help=f"a surface file (stl, obj, ply, off, ...) or a shape such as box:1,0.1,0.1 "
                                       f"({', '.join(SHAPE_NAMES)})")
     parser.add_argument("-o", "--output", required=True, type=Path,
                         help="the tet mesh file to write; its extension names the format (vtu, msh, xdmf, mesh, ...)")
-    parser.add_argument("--size", required=True, type=float, help="target tet edge length, in the input's units")
+    parser.add_argument("--size", required=True, type=float, help="target tet edge length, in --units")
     parser.add_argument("--method", choices=METHODS, default="gmsh", help="meshing backend (default gmsh)")
     parser.add_argument("--shells", type=int, default=0, metavar="N", help="number of virtual shell layers")
-    parser.add_argument("--shell-thickness", type=float, default=None, metavar="T", help="offset between layers")
+    parser.add_argument("--shell-thickness", type=float, default=None, metavar="T",
+                        help="offset between layers, in --units")
+    add_unit_arguments(parser, applies_to="the input (a file's coordinates, or a built-in shape's dimensions) and of "
+                                          "--size and --shell-thickness",
+                       scale_applies_to="the input (a file's coordinates, or a built-in shape's dimensions; not "
+                                        "--size or --shell-thickness)")
     parser.add_argument("--seed", type=int, default=None, help="random seed (Delaunay lattice jitter, gmsh)")
     parser.add_argument("--verbose", action="store_true", help="log the repairs and steps, and gmsh's output")
     return parser
 
 
 def _output_format(path: Path) -> str:
-    """The meshio format for the output's extension, checked before any meshing is done."""
+    """The meshio format for the output's extension, and whether it can be written there, checked before any
+    meshing is done."""
     from volspring.mesh import mesh_file_format
 
+    if path.is_dir():
+        raise ValueError(f"output {path} is a directory; expected a mesh file to write")
+    # The nearest folder that exists: the write creates the missing ones below it.
+    existing = next(parent for parent in path.parents if parent.exists() or parent == parent.parent)
+    if existing.exists() and not existing.is_dir():
+        raise ValueError(f"cannot write output {path}: {existing} is a file, not a directory")
+    if existing.is_dir() and not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"cannot write output {path}: no permission to create files in {existing}")
     try:
-        return mesh_file_format(path)
+        file_format = mesh_file_format(path)
     except ValueError:
         raise ValueError(f"cannot tell the mesh format of output {str(path)!r} from its extension "
                          f"{path.suffix!r}; use e.g. .vtu, .msh, .xdmf or .mesh") from None
+    if file_format == "xdmf" and path.with_suffix(".h5").is_dir():
+        raise ValueError(f"cannot write output {path}: its heavy data goes to {path.with_suffix('.h5')}, "
+                         "which is a directory")
+    return file_format
 
 
-def _read_input(text: str):
-    """A Shape for a built-in spec, else a checked surface; and the body's own volume."""
-    from meshing.shapes import looks_like_shape, parse_shape
+def _read_input(text: str, units: str, scale):
+    """A Shape for a built-in spec, else a checked surface, in metres; the body's own volume; a description."""
+    from meshing.shapes import Shape, looks_like_shape, parse_shape
     from meshing.surface import load_surface
+    from volspring.units import length_factor
 
+    factor = length_factor(units, scale)
+    converted = "" if factor == 1.0 else f" (x{factor:g} to m)"
     path = Path(text)
     if not path.exists() and looks_like_shape(text):
         shape = parse_shape(text)
-        return shape, shape.volume, f"built-in {shape.spec()} (exact volume)"
-    surface = load_surface(path)
-    return surface, float(surface.volume), f"{path.name}: {len(surface.vertices)} vertices, {len(surface.faces)} faces"
+        if factor != 1.0:
+            shape = Shape(shape.name, tuple(dimension * factor for dimension in shape.dimensions))
+        return shape, shape.volume, f"built-in {shape.spec()} (exact volume){converted}"
+    surface = load_surface(path, units=units, scale=scale)
+    return surface, float(surface.volume), (f"{path.name}: {len(surface.vertices)} vertices, "
+                                            f"{len(surface.faces)} faces{converted}")
 
 
 def _run(args) -> str:
@@ -76,21 +105,26 @@ def _run(args) -> str:
     from meshing.quality import quality_summary
     from meshing.tetrahedralize import tetrahedralize
 
+    from volspring.units import UNITS
+
     file_format = _output_format(args.output)
+    if args.scale is not None and not (math.isfinite(args.scale) and args.scale > 0):
+        raise ValueError(f"--scale = {args.scale} is not a finite number > 0")
     if not args.size > 0:
         raise ValueError(f"--size = {args.size} is not a positive length")
     if args.shells < 0:
         raise ValueError(f"--shells = {args.shells} is negative; expected a number of layers >= 0")
     if args.shells and args.shell_thickness is None:
         raise ValueError(f"--shells {args.shells} needs --shell-thickness")
-    body, surface_volume, described = _read_input(args.input)
+    size = args.size * UNITS[args.units]  # lengths on the command line are in --units, not scaled
+    body, surface_volume, described = _read_input(args.input, args.units, args.scale)
     start = time.perf_counter()
-    mesh = tetrahedralize(body, size=args.size, method=args.method, seed=args.seed, verbose=args.verbose)
+    mesh = tetrahedralize(body, size=size, method=args.method, seed=args.seed, verbose=args.verbose)
     elapsed = time.perf_counter() - start
     if args.shells:
         from meshing.shells import add_shells
 
-        topology = add_shells(mesh, layers=args.shells, thickness=args.shell_thickness)
+        topology = add_shells(mesh, layers=args.shells, thickness=args.shell_thickness * UNITS[args.units])
     else:
         topology = SpringTopology.from_mesh(mesh)
     quality = quality_summary(mesh)
@@ -100,13 +134,13 @@ def _run(args) -> str:
     springs = ", ".join(f"{count} {kind}" for kind, count in topology.kind_counts().items() if count)
     lines = [
         f"input: {described}",
-        f"method: {args.method}, size {args.size:g}" + (f", seed {args.seed}" if args.seed is not None else "")
+        f"method: {args.method}, size {size:g} m" + (f", seed {args.seed}" if args.seed is not None else "")
         + f" ({elapsed:.2f} s)",
         f"nodes: {mesh.node_count} mesh" + (f" + {topology.shell_node_count} shell in {args.shells} layer(s)"
                                             if args.shells else ""),
         f"tets: {mesh.tet_count}",
         f"springs: {topology.spring_count} ({springs})",
-        f"volume: tets {mesh.volume:.6g}, surface {surface_volume:.6g}, relative difference {relative:+.3e}",
+        f"volume: tets {mesh.volume:.6g} m^3, surface {surface_volume:.6g} m^3, relative difference {relative:+.3e}",
         str(quality),
         f"wrote {args.output} ({file_format}" + ("; the tet mesh only, not the shell nodes and springs)"
                                                  if args.shells else ")"),
@@ -118,7 +152,9 @@ def main(argv=None) -> int:
     """Run ``volspring-mesh`` with ``argv`` (default: the command line); returns the exit code.
 
     Bad input prints one line ``volspring-mesh: error: ...`` on stderr and returns 2 (usage) or 1
-    (anything else); no output file is left behind.
+    (anything else); no output file is left behind. The output's folder and format are checked
+    before anything is read or meshed. Warnings (such as a body read in metres that is over 10 m
+    across) print one line each, ``volspring-mesh: warning: ...``, on stderr.
     """
     try:
         args = _parser().parse_args(argv)
@@ -127,13 +163,23 @@ def main(argv=None) -> int:
         return 2
     if args.verbose:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
-    try:
-        print(_run(args))
-    except (ValueError, OSError, RuntimeError) as error:
-        message = " ".join(str(error).split())
-        print(f"{PROG}: error: {message}", file=sys.stderr)
-        return 1
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", UserWarning)
+        try:
+            summary = _run(args)
+        except (ValueError, OSError, RuntimeError) as error:
+            _print_warnings(caught)
+            message = " ".join(str(error).split())
+            print(f"{PROG}: error: {message}", file=sys.stderr)
+            return 1
+    _print_warnings(caught)
+    print(summary)
     return 0
+
+
+def _print_warnings(caught) -> None:
+    for warning in caught:
+        print(f"{PROG}: warning: {' '.join(str(warning.message).split())}", file=sys.stderr)
 
 
 if __name__ == "__main__":

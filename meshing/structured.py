@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from volspring.mesh import TetMesh
+from volspring.mesh import TetMesh, signed_tet_volumes
 
 __all__ = ["KUHN_PATHS", "structured_box"]
 
@@ -73,4 +73,8 @@ def structured_box(cells, size, *, origin=(0.0, 0.0, 0.0), pattern: str = "mirro
     corner = [index[i + (a ^ flip_i), j + (b ^ flip_j), k + (c ^ flip_k)]
               for a in (0, 1) for b in (0, 1) for c in (0, 1)]
     tets = np.concatenate([np.stack([corner[p] for p in path], axis=1) for path in KUHN_PATHS])
-    return TetMesh.oriented(points, tets)
+    # Half of Kuhn's paths, and every mirrored cell, number their tets the other way round: orient each
+    # tet here, where that is by construction (TetMesh.oriented refuses mixed orientations as tangles).
+    negative = signed_tet_volumes(points, tets) < 0
+    tets[negative, 2:] = tets[negative, 3:1:-1]
+    return TetMesh(points, tets)

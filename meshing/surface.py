@@ -26,7 +26,7 @@ class SurfaceError(ValueError):
     """A surface that cannot bound a solid, with what is wrong and where."""
 
 
-def load_surface(source, *, name: str | None = None):
+def load_surface(source, *, name: str | None = None, units: str = "m", scale=None):
     """Load a triangle surface and make sure it bounds a solid, repairing what trimesh can.
 
     Repairs (each logged at INFO level with counts): merging vertices at the same position
@@ -35,20 +35,38 @@ def load_surface(source, *, name: str | None = None):
 
     Parameters
     ----------
-    source : path-like or trimesh.Trimesh -- a surface file (see :data:`SURFACE_EXTENSIONS`) or an
-        in-memory mesh (not modified; a repaired copy is returned)
-    name : str, optional -- how to call the surface in messages (default: the file name)
+    source : path-like or trimesh.Trimesh
+        A surface file (see :data:`SURFACE_EXTENSIONS`) or an in-memory mesh (not modified; a
+        repaired copy is returned).
+    name : str, optional
+        How to call the surface in messages (default: the file name).
+    units : {"m", "cm", "mm"}
+        The length unit of the coordinates; they are converted to metres.
+    scale : float, optional
+        A further factor on the coordinates; the factor to metres is ``UNITS[units] * scale``
+        (:func:`volspring.units.length_factor`).
 
     Returns
     -------
-    trimesh.Trimesh -- closed, consistently wound, outward normals, no degenerate faces
+    trimesh.Trimesh
+        Closed, consistently wound, outward normals, no degenerate faces; coordinates [m].
 
     Raises
     ------
+    ValueError
+        For bad ``units`` or ``scale`` (checked before the file is opened).
     SurfaceError
-        For a missing or empty file, an unknown extension, no triangles, non-finite coordinates,
-        open edges (holes), non-manifold edges or vertices, a non-orientable surface, or faces that
-        cut through each other; the message names the counts and the first offender.
+        For a missing or empty file, an unknown extension, no triangles, non-finite coordinates or
+        coordinates so large that volumes overflow float64, open edges (holes), non-manifold edges or
+        vertices, a non-orientable surface, or faces that cut through each other; the message names
+        the counts and the first offender. Also when making the winding consistent needs networkx
+        and it is not installed.
+
+    Warns
+    -----
+    UserWarning
+        When a file read in metres with no explicit ``scale`` is more than 10 m across: probably
+        millimetres (:func:`volspring.units.warn_if_large`). In-memory meshes are not warned about.
 
     Examples
     --------
@@ -59,6 +77,9 @@ def load_surface(source, *, name: str | None = None):
     """
     import trimesh
 
+    from volspring.units import length_factor, scaled_points, warn_if_large
+
+    factor = length_factor(units, scale)
     if isinstance(source, trimesh.Trimesh):
         name = name or "the surface"
         mesh = trimesh.Trimesh(np.array(source.vertices, dtype=np.float64), np.array(source.faces), process=False)
@@ -67,6 +88,14 @@ def load_surface(source, *, name: str | None = None):
         name = name or os.fspath(path)
         mesh = _read(path, name)
     _check_finite(mesh, name)
+    if factor != 1.0:
+        try:
+            mesh.vertices = scaled_points(mesh.vertices, factor, name=name)
+        except ValueError as error:
+            raise SurfaceError(str(error)) from None
+        _check_finite(mesh, name)
+    if not isinstance(source, trimesh.Trimesh):
+        warn_if_large(mesh.vertices, units=units, scale=scale, name=name)
     _repair(mesh, name)
     _check_closed_manifold(mesh, name)
     _orient(mesh, name)
@@ -96,6 +125,8 @@ def _read(path: Path, name: str):
 
 
 def _check_finite(mesh, name):
+    from volspring.mesh import LARGEST_COORDINATE
+
     if len(mesh.faces) == 0:
         raise SurfaceError(f"{name}: the surface has no triangles")
     bad = ~np.isfinite(mesh.vertices).all(axis=1)
@@ -103,6 +134,13 @@ def _check_finite(mesh, name):
         first = np.flatnonzero(bad)[0]
         raise SurfaceError(f"{name}: {bad.sum()} vertex(es) have non-finite coordinates, first is vertex {first} "
                            f"at {mesh.vertices[first].tolist()}")
+    magnitude = np.abs(mesh.vertices).max(axis=1)
+    if magnitude.max() > LARGEST_COORDINATE:  # volumes, products of three coordinates, would overflow
+        first = int(np.argmax(magnitude))
+        raise SurfaceError(f"{name}: coordinates are too large: the largest absolute coordinate is "
+                           f"{magnitude[first]:.3g} (vertex {first}), and volumes must be finite in float64 "
+                           f"(below {np.finfo(np.float64).max:.3g}): expected coordinates below about "
+                           f"{LARGEST_COORDINATE:.3g}; are they in the right units?")
 
 
 def _repair(mesh, name):
@@ -169,7 +207,11 @@ def _orient(mesh, name):
     import trimesh
 
     if not mesh.is_winding_consistent:
-        trimesh.repair.fix_winding(mesh)
+        try:
+            trimesh.repair.fix_winding(mesh)
+        except ImportError as error:  # trimesh walks the face graph with networkx, a soft dependency of its own
+            raise SurfaceError(f"{name}: making the face winding consistent needs the package networkx "
+                               f"(pip install networkx): {error}") from error
         if not mesh.is_winding_consistent:
             raise SurfaceError(f"{name}: the surface is not orientable (no consistent winding exists)")
         logger.info("%s: made the face winding consistent", name)
@@ -186,7 +228,19 @@ def _orient(mesh, name):
 
 
 def _check_self_intersection(mesh, name):
-    """Refuse faces that cut through each other (faces sharing a vertex are not tested)."""
+    """Refuse faces that cut through each other (faces sharing a vertex are not tested).
+
+    Two tests, on the pairs of faces whose bounding boxes overlap:
+
+    - An edge of one face passing strictly through the other (:func:`_edges_cross`): any crossing in
+      general position, within one body or between bodies.
+    - Between two bodies (connected parts), exact contacts decided by nudging: boxes offset by half their
+      size cross only on the diagonals that split their square sides, and overlapping boxes can share
+      side planes, where no crossing is strict. Each body pair is tested again with one body moved by
+      :data:`_NUDGE` of the pair's size, along each of :data:`_NUDGE_DIRECTIONS` and their opposites. An
+      overlap of some volume survives every such move; bodies that only touch (a side lying against a
+      side) come apart under at least one, and pass.
+    """
     tri = mesh.triangles
     low, high = tri.min(axis=1), tri.max(axis=1)
     cell = float(np.median((high - low).max(axis=1))) or 1.0
@@ -222,33 +276,82 @@ def _check_self_intersection(mesh, name):
     pairs = pairs[disjoint & overlap]
     if len(pairs) == 0:
         return
-    hit = _edges_cross(tri[pairs[:, 0]], tri[pairs[:, 1]]) | _edges_cross(tri[pairs[:, 1]], tri[pairs[:, 0]])
+    first_tri, second_tri = tri[pairs[:, 0]], tri[pairs[:, 1]]
+    hit = _faces_cross(first_tri, second_tri)
+    body = _body_labels(mesh)
+    between = np.flatnonzero(body[pairs[:, 0]] != body[pairs[:, 1]])
+    if not hit.any() and len(between):
+        first_body, second_body = body[pairs[between, 0]], body[pairs[between, 1]]
+        body_pair = np.minimum(first_body, second_body) * (body.max() + 1) + np.maximum(first_body, second_body)
+        # Move the body with the larger label by `step` relative to the other; `size` is the pair's extent.
+        sign = np.sign(first_body - second_body).astype(np.float64)
+        size = np.ptp(np.concatenate([first_tri[between], second_tri[between]], axis=1), axis=1).max(axis=1)
+        overlapping, first_move = np.unique(body_pair), None
+        for direction in np.concatenate([_NUDGE_DIRECTIONS, -_NUDGE_DIRECTIONS]):  # six moves, not a loop over faces
+            step = (_NUDGE * sign * size)[:, None, None] * direction
+            crossing = _faces_cross(first_tri[between] + step, second_tri[between])
+            overlapping = np.intersect1d(overlapping, body_pair[crossing])
+            first_move = crossing if first_move is None else first_move
+        hit[between] = first_move & np.isin(body_pair, overlapping)
     if hit.any():
         first = pairs[np.flatnonzero(hit)[0]]
         raise SurfaceError(f"{name}: {hit.sum()} pair(s) of faces cut through each other; first are faces "
                            f"{first[0]} and {first[1]} near {tri[first[0]].mean(axis=0).tolist()}")
 
 
+#: Four points whose signed volume is at most this times the cube of the pair's extent count as coplanar:
+#: the determinant's round-off is ~1e-16 of that cube, so 1e-12 leaves four orders of margin.
+_COPLANAR = 1e-12
+#: How far bodies are moved, relative to the size of a pair of faces, to decide exact contacts: far above
+#: the coplanar tolerance (1e-6 l moves a signed volume by ~1e-6 l^3 >> 1e-12 l^3), far below any feature
+#: a surface meant for meshing has.
+_NUDGE = 1e-6
+#: The directions of those moves: three fixed generic ones (the rows of a rotation parallel to no axis or
+#: diagonal of a hand-made surface), each also taken the other way round.
+_NUDGE_DIRECTIONS = np.linalg.qr(np.array([[0.9134, 0.2331, -0.3337], [-0.1822, 0.9614, 0.2061],
+                                           [0.3627, -0.1438, 0.9207]]))[0]
+
+
+def _body_labels(mesh) -> np.ndarray:
+    """(f,) int -- the connected part (faces joined across edges) each face belongs to."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    adjacency = mesh.face_adjacency
+    graph = coo_matrix((np.ones(len(adjacency)), (adjacency[:, 0], adjacency[:, 1])),
+                       shape=(len(mesh.faces), len(mesh.faces)))
+    return connected_components(graph, directed=False)[1]
+
+
+def _signed_volumes(a, b, c, d):
+    """(p,) float -- det[b - a, c - a, d - a]: positive when d lies on the side of plane abc its normal points to."""
+    return np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))
+
+
+def _faces_cross(first, second):
+    """(p,) bool -- whether an edge of either triangle of each pair passes strictly through the other."""
+    return _edges_cross(first, second) | _edges_cross(second, first)
+
+
 def _edges_cross(edge_triangles, triangles):
-    """(p,) bool -- whether an edge of ``edge_triangles[i]`` passes through the interior of ``triangles[i]``."""
+    """(p,) bool -- whether an edge of ``edge_triangles[i]`` passes strictly through ``triangles[i]``.
+
+    Strictly: its ends lie on opposite sides of the triangle's plane and the line through it passes
+    each edge of the triangle on the same turning side, all with signed volumes beyond
+    :data:`_COPLANAR` of zero. An edge that touches the plane with an end, lies in it, or meets the
+    triangle exactly on its boundary does not count here (see :func:`_check_self_intersection`).
+    """
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    corners = np.concatenate([edge_triangles, triangles], axis=1)
+    tolerance = _COPLANAR * np.ptp(corners, axis=1).max(axis=1) ** 3
     hit = np.zeros(len(triangles), dtype=bool)
-    p0, e1, e2 = triangles[:, 0], triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]
     for start, end in ((0, 1), (1, 2), (2, 0)):  # the three edges, not a loop over faces
-        origin = edge_triangles[:, start]
-        direction = edge_triangles[:, end] - origin
-        h = np.cross(direction, e2)
-        det = np.einsum("ij,ij->i", e1, h)
-        ok = np.abs(det) > 1e-12 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(
-            direction, axis=1)
-        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        s = origin - p0
-        u = inv * np.einsum("ij,ij->i", s, h)
-        q = np.cross(s, e1)
-        v = inv * np.einsum("ij,ij->i", direction, q)
-        t = inv * np.einsum("ij,ij->i", e2, q)
-        # Strict inequalities with a small margin: touching is not crossing.
-        eps = 1e-9
-        hit |= ok & (u > eps) & (v > eps) & (u + v < 1 - eps) & (t > eps) & (t < 1 - eps)
+        p, q = edge_triangles[:, start], edge_triangles[:, end]
+        side_p, side_q = _signed_volumes(a, b, c, p), _signed_volumes(a, b, c, q)
+        through_plane = ((side_p > tolerance) & (side_q < -tolerance)) | ((side_p < -tolerance) & (side_q > tolerance))
+        turns = np.stack([_signed_volumes(p, q, a, b), _signed_volumes(p, q, b, c), _signed_volumes(p, q, c, a)])
+        inside = (turns > tolerance).all(axis=0) | (turns < -tolerance).all(axis=0)
+        hit |= through_plane & inside
     return hit
 
 

@@ -63,7 +63,7 @@ MESHES = {"cube 3x3x3": lambda: cube_mesh((3, 3, 3)), "jittered Delaunay": jitte
 def bunny(shared_data):
     surface = trimesh.load(shared_data / "coarse_bunny.obj", process=True)
     surface.merge_vertices(merge_tex=True, merge_norm=True)
-    return TetMesh.read(shared_data / "coarse_bunny.mesh"), surface
+    return TetMesh.read(shared_data / "coarse_bunny.mesh", scale=1.0), surface  # its own units, as the surface
 
 
 @pytest.mark.parametrize("name", sorted(MESHES))

@@ -20,7 +20,7 @@ def pitted_box() -> TetMesh:
 
 @pytest.fixture(scope="module")
 def bunny_mesh(shared_data) -> TetMesh:
-    return TetMesh.read(shared_data / "coarse_bunny.mesh")
+    return TetMesh.read(shared_data / "coarse_bunny.mesh", scale=1.0)  # the file's own units
 
 
 def surface_of(mesh: TetMesh):

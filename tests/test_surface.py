@@ -16,7 +16,7 @@ def _box():
 
 def test_bunny_seams_are_merged_and_reported(shared_data, caplog):
     with caplog.at_level(logging.INFO, logger="meshing.surface"):
-        surface = load_surface(shared_data / "coarse_bunny.obj")
+        surface = load_surface(shared_data / "coarse_bunny.obj", scale=1.0)  # the file's own units, as the README
     # Figures from tests/data/README.md: 502 vertices once positions are merged, genus 0, ~8.37e5.
     assert len(surface.vertices) == 502 and len(surface.faces) == 1000
     assert surface.is_watertight and surface.is_winding_consistent and surface.euler_number == 2
@@ -131,3 +131,73 @@ def test_winding_numbers_match_the_exact_sphere():
     clear = np.abs(radius - 0.5) > 5e-3
     np.testing.assert_array_equal(winding[clear] == 1, radius[clear] < 0.5)
     np.testing.assert_array_equal(contains_points(surface, points), winding > 0)
+
+
+# ---------------------------------------------------------------------- self-intersection at exact degeneracies
+def test_cubes_crossing_exactly_on_diagonals_are_refused():
+    # Every crossing of these two boxes lies at the centre of a square side, on the diagonal that splits it
+    # into two triangles: a test that is strict on both triangles misses all of them (and the body meshes
+    # to volume 2 instead of the union's 1.875).
+    with pytest.raises(SurfaceError, match=r"pair\(s\) of faces cut through each other; first are faces"):
+        load_surface(_offset_box([0.5, 0.5, 0.5]))
+
+
+@pytest.mark.parametrize("offset", [[0.5, 0.5, 0.0], [0.5, 0.0, 0.0], [0.25, 0.5, 0.75]])
+def test_other_overlaps_through_edges_and_corners_are_refused(offset):
+    with pytest.raises(SurfaceError, match="cut through each other"):
+        load_surface(_offset_box(offset))
+
+
+@pytest.mark.parametrize("offset", [[2.0, 0.0, 0.0], [1.5, 1.5, 1.5], [1.0, 0.5, 0.5]])
+def test_separate_or_touching_bodies_pass(offset):
+    # Apart, or (the last) one box's side lying against the other's: they touch, they do not cut.
+    surface = load_surface(_offset_box(offset))
+    assert surface.body_count == 2 and surface.volume == pytest.approx(2.0, rel=1e-12)  # two unit boxes
+
+
+def test_smooth_closed_shapes_pass():
+    from meshing.shapes import torus
+
+    for shape in (sphere(0.5), torus(0.5, 0.15)):
+        surface = shape.surface(size=0.05)
+        assert load_surface(surface).volume == pytest.approx(surface.volume, rel=1e-12)  # nothing repaired
+
+
+# ---------------------------------------------------------------------- units
+def test_surface_in_millimetres(shared_data, recwarn):
+    surface = load_surface(shared_data / "coarse_bunny.obj", units="mm")
+    assert len(recwarn) == 0
+    # The data README's volume 8.37e5 (3 digits) in mm^3, in m^3.
+    assert surface.volume == pytest.approx(8.37e5 * 1e-9, rel=1e-3)
+    both = load_surface(shared_data / "coarse_bunny.obj", units="cm", scale=0.5)
+    assert both.volume == pytest.approx(8.37e5 * 0.005**3, rel=1e-3)  # units x scale, README's 3 digits
+
+
+def test_bunny_read_in_metres_warns(shared_data):
+    with pytest.warns(UserWarning, match=r"coarse_bunny.obj is 262 m across .*units=\"mm\""):
+        load_surface(shared_data / "coarse_bunny.obj")
+
+
+def test_in_memory_surfaces_are_scaled_but_never_warned_about(recwarn):
+    big = _box()
+    big.apply_scale(100.0)
+    assert load_surface(big).volume == pytest.approx(1e6, rel=1e-12)  # 100 m box, round-off only
+    assert load_surface(big, units="mm").volume == pytest.approx(1e-3, rel=1e-12)  # the 100 mm box
+    assert len(recwarn) == 0
+
+
+@pytest.mark.parametrize("options, fragment", [
+    ({"units": "ft"}, "units = 'ft' is not a known length unit"),
+    ({"scale": -2}, "scale = -2 is not a finite number > 0"),
+])
+def test_bad_units_are_refused(options, fragment):
+    with pytest.raises(ValueError, match=fragment):
+        load_surface(_box(), **options)
+
+
+def test_coordinates_whose_volume_overflows_are_refused(tmp_path):
+    path = tmp_path / "huge.obj"
+    path.write_text("v 0 0 0\nv 1e150 0 0\nv 0 1e150 0\nv 0 0 1e150\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n")
+    with pytest.raises(SurfaceError, match=r"coordinates are too large: the largest absolute coordinate is "
+                                           r"1e\+150"):
+        load_surface(path)

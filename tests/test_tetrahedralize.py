@@ -82,7 +82,7 @@ def test_volume_error_shrinks_as_size_halves(method):
 
 @pytest.fixture(scope="module")
 def bunny(shared_data):
-    surface = load_surface(shared_data / "coarse_bunny.obj")
+    surface = load_surface(shared_data / "coarse_bunny.obj", scale=1.0)  # the file's own units
     surface.apply_scale(0.001)  # about 160 units across -> 0.16 m
     return surface
 

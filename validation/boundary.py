@@ -13,7 +13,7 @@ Examples
 >>> from validation.boundary import Box, Clamp, resolve_clamps
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 >>> tets = [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]]
->>> cube = TetMesh.oriented(corners, tets)
+>>> cube = TetMesh.compact(corners, tets)
 >>> fixed = resolve_clamps(cube, [Clamp(Box.plane(axis, 0.0), components=axis) for axis in "xyz"])
 >>> fixed.node_mask.sum(axis=0)   # four nodes on each symmetry plane, one component each
 array([4, 4, 4])

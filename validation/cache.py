@@ -17,7 +17,7 @@ Examples
 >>> from validation.cache import cached_solve_static
 >>> from validation.boundary import Box
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
->>> cube = TetMesh.oriented(corners, [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]])
+>>> cube = TetMesh.compact(corners, [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]])
 >>> folder = tempfile.mkdtemp()
 >>> first = cached_solve_static(cube, (1e6, 0.3, 1e3), clamp=Box.plane("z", 0.0), gravity=(0, 0, -9.81), folder=folder)
 >>> again = cached_solve_static(cube, (1e6, 0.3, 1e3), clamp=Box.plane("z", 0.0), gravity=(0, 0, -9.81), folder=folder)

@@ -23,7 +23,7 @@ uniaxial stress, so the strain is 1e-3 along x and -nu * 1e-3 across, which P1 r
 >>> from validation.fem import solve_static
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 >>> tets = [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]]
->>> cube = TetMesh.oriented(corners, tets)
+>>> cube = TetMesh.compact(corners, tets)
 >>> symmetry = [Clamp(Box.plane(axis, 0.0), components=axis) for axis in "xyz"]
 >>> pull = Traction(Box.plane("x", 1.0), (1e3, 0.0, 0.0))
 >>> solution = solve_static(cube, (1e6, 0.3, 1000.0), clamp=symmetry, traction=pull, element="P1")

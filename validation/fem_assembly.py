@@ -13,7 +13,7 @@ Examples
 >>> from validation.fem_assembly import skfem_space, stiffness_matrix
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 >>> tets = [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]]
->>> space = skfem_space(TetMesh.oriented(corners, tets), "P2")
+>>> space = skfem_space(TetMesh.compact(corners, tets), "P2")
 >>> int(space.basis.N), space.node_dofs.shape, space.edge_dofs.shape   # 3 x (8 nodes + 19 edges)
 (81, (8, 3), (19, 3))
 >>> stiffness_matrix(space, 1e6, 0.3).shape

@@ -54,9 +54,10 @@ class TetMesh:
     Raises
     ------
     ValueError
-        For wrong shapes, non-finite coordinates, indices out of range, nodes used by
-        no tet, or tets that are inverted or of zero volume (use :meth:`oriented` to
-        flip inverted tets of an otherwise good mesh).
+        For wrong shapes, non-finite coordinates, coordinates so large or small that tet
+        volumes overflow or underflow float64, indices out of range, nodes used by no tet,
+        or tets that are inverted or of zero volume (:meth:`oriented` flips a mesh whose
+        every tet is inverted; :meth:`compact` orders each tet of a mesher's output).
 
     Examples
     --------
@@ -93,17 +94,18 @@ class TetMesh:
                 f"{unused.sum()} node(s) are used by no tet, first is node {np.flatnonzero(unused)[0]} "
                 "(drop them with TetMesh.compact)"
             )
-        volumes = signed_tet_volumes(points, tets)
-        # Zero volume relative to the tet's own size: |V| below 1e-12 l^3 is round-off of a flat tet.
-        scale = np.ptp(points[tets], axis=1).max(axis=1) ** 3
-        flat = np.abs(volumes) <= 1e-12 * scale
+        volumes, extent = _volumes_and_extents(points, tets)
+        flat = np.abs(volumes) <= ZERO_VOLUME * extent**3
         if flat.any():
             raise ValueError(f"{flat.sum()} tet(s) have zero volume, first is tet {np.flatnonzero(flat)[0]}")
         inverted = volumes < 0
         if inverted.any():
+            first = np.flatnonzero(inverted)[0]
             raise ValueError(
-                f"{inverted.sum()} tet(s) are negatively oriented, first is tet {np.flatnonzero(inverted)[0]} "
-                "(TetMesh.oriented flips them)"
+                f"{inverted.sum()} of {len(tets)} tet(s) are negatively oriented, first is tet {first} with signed "
+                f"volume {volumes[first]:.3g} m^3; expected det[x1 - x0, x2 - x0, x3 - x0] > 0 (TetMesh.oriented "
+                "flips a mesh whose every tet is inverted, TetMesh.compact puts each tet of a mesher's output in "
+                "positive order)"
             )
         points.setflags(write=False)
         tets.setflags(write=False)
@@ -114,23 +116,125 @@ class TetMesh:
     # ------------------------------------------------------------------ constructors
     @classmethod
     def oriented(cls, points, tets) -> "TetMesh":
-        """Build a mesh after flipping negatively oriented tets (swapping their last two nodes)."""
+        """Build a mesh whose tets are all positively oriented, or all negatively (then flipped).
+
+        Some file formats and meshers number every tet the other way round: such a mesh is flipped
+        (the last two nodes of each tet swapped) and that is logged at INFO level. A mesh in which
+        only some tets are inverted is refused: that is what a node pushed through its neighbours
+        looks like, and flipping would count the volume the inverted tets fold over twice.
+
+        Parameters
+        ----------
+        points : (n, 3) float
+            Node positions [m].
+        tets : (m, 4) int
+            Node indices of each tet, all in one orientation.
+
+        Returns
+        -------
+        TetMesh
+
+        Raises
+        ------
+        ValueError
+            For a mesh where some but not all tets are inverted, naming how many of how many and the
+            first (index and signed volume), and whether the mesh is tangled (two tets on the same side
+            of a face they share) or only numbered in mixed orientations (then :meth:`compact` builds
+            it); and for anything :class:`TetMesh` refuses.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> corners = np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+        >>> TetMesh.oriented(corners, [[0, 2, 1, 3]]).tets   # the one tet, numbered the other way round
+        array([[0, 2, 3, 1]])
+        """
         points = np.asarray(points, dtype=np.float64)
         tets = np.array(tets, dtype=np.int64, copy=True)
-        if tets.ndim == 2 and tets.shape[1] == 4 and len(tets) and tets.min() >= 0 and tets.max() < len(points):
-            flip = signed_tet_volumes(points, tets) < 0
-            if flip.any():
-                logger.info("flipped %d negatively oriented tets", flip.sum())
-                tets[flip, 2:] = tets[flip, 3:1:-1]
+        if not _geometry_ready(points, tets):
+            return cls(points, tets)  # let the constructor say what is wrong
+        volumes, extent = _volumes_and_extents(points, tets)
+        if (np.abs(volumes) <= ZERO_VOLUME * extent**3).any():
+            return cls(points, tets)  # flat tets: the constructor names them
+        negative = volumes < 0
+        if negative.all():
+            logger.info("all %d tets are negatively oriented (the other orientation convention): flipped them all",
+                        len(tets))
+            tets[:, 2:] = tets[:, 3:1:-1]
+        elif negative.any():
+            # Inverted: the tets oriented against the majority (the convention the mesh was made in).
+            inverted = negative if negative.sum() <= len(tets) / 2 else ~negative
+            first = np.flatnonzero(inverted)[0]
+            counts = (f"{inverted.sum()} of {len(tets)} tets are inverted (oriented against the other "
+                      f"{len(tets) - inverted.sum()}), first is tet {first} with signed volume "
+                      f"{volumes[first]:.3g} m^3")
+            if len(_tangled_faces(_positive_order(tets, negative))):
+                raise ValueError(
+                    f"the mesh is tangled: {counts}; they overlap their neighbours, as when a node is pushed "
+                    "through them. Flipping them would count the volume they fold over twice: untangle or remesh "
+                    "where the mesh was made"
+                )
+            raise ValueError(
+                f"{counts}; the mesh is not tangled (every face between two tets has them on opposite sides), its "
+                "tets are only numbered in mixed orientations: TetMesh.compact(points, tets) puts each tet in "
+                "positive order"
+            )
         return cls(points, tets)
 
     @classmethod
     def compact(cls, points, tets) -> "TetMesh":
-        """Build a mesh from the nodes the tets use, renumbered in their original order."""
-        points = np.asarray(points, dtype=np.float64)
-        tets = np.asarray(tets, dtype=np.int64)
-        used, inverse = np.unique(tets.ravel(), return_inverse=True)
-        return cls.oriented(points[used], inverse.reshape(tets.shape))
+        """Build a mesh from a mesher's output: unused nodes dropped, each tet put in positive order.
+
+        Meant for tets that come in arbitrary orientation by construction (scipy's ``Delaunay``
+        simplices, hand-numbered cells). The nodes the tets use are kept and renumbered in their
+        original order; every negatively oriented tet is flipped (its last two nodes swapped). The
+        flipped mesh must not be tangled: two tets sharing a face must lie on opposite sides of it.
+
+        Parameters
+        ----------
+        points : (n, 3) float
+            Node positions [m]; nodes no tet uses are dropped.
+        tets : (m, 4) int
+            Node indices of each tet, in any orientation.
+
+        Returns
+        -------
+        TetMesh
+
+        Raises
+        ------
+        ValueError
+            For a tangled mesh (naming how many faces have both their tets on one side, and the first),
+            and for anything :class:`TetMesh` refuses.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
+        >>> kuhn = [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]]
+        >>> round(TetMesh.compact(corners, kuhn).volume, 12)   # three of the six are numbered inverted
+        1.0
+        """
+        points, tets = _used_nodes(points, tets)
+        if not _geometry_ready(points, tets):
+            return cls(points, tets)
+        volumes, extent = _volumes_and_extents(points, tets)
+        if (np.abs(volumes) <= ZERO_VOLUME * extent**3).any():
+            return cls(points, tets)  # flat tets: the constructor names them
+        negative = volumes < 0
+        tets = _positive_order(tets, negative)
+        tangled = _tangled_faces(tets)
+        if len(tangled):
+            a, b = tangled[0]
+            face = sorted(set(tets[a].tolist()) & set(tets[b].tolist()))
+            raise ValueError(
+                f"the mesh is tangled: with each tet in positive order, {len(tangled)} face(s) have their two tets on "
+                f"the same side (the tets overlap), first are tets {a} and {b} sharing the face of nodes {face} "
+                "(after dropping unused nodes), as when a node is pushed through its neighbours"
+            )
+        if negative.any():
+            logger.info("put %d of %d tets in positive order", negative.sum(), len(tets))
+        return cls(points, tets)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -227,8 +331,9 @@ class TetMesh:
     def from_meshio(cls, mesh) -> "TetMesh":
         """Take the ``tetra`` cells of a ``meshio.Mesh`` (other cells are ignored).
 
-        Nodes that no tet uses (for example the nodes of lower-dimensional cells only)
-        are dropped and the rest renumbered; inverted tets are flipped.
+        Nodes that no tet uses (for example the nodes of lower-dimensional cells only) are dropped
+        and the rest renumbered; the tets then go through :meth:`oriented`: a mesh whose every tet
+        is inverted is flipped, one where only some are is refused as tangled.
         """
         blocks = [block.data for block in mesh.cells if block.type == "tetra"]
         if not blocks:
@@ -238,16 +343,49 @@ class TetMesh:
         points = np.asarray(mesh.points, dtype=np.float64)
         if points.ndim == 2 and points.shape[1] == 2:
             raise ValueError(f"the mesh is 2D (points of shape {points.shape}); a TetMesh needs 3D points")
-        dropped = len(points) - len(np.unique(tets))
-        if dropped:
-            logger.info("dropped %d node(s) used by no tet", dropped)
-        return cls.compact(points, tets)
+        points, used = _used_nodes(points, tets)
+        if len(points) < len(mesh.points):
+            logger.info("dropped %d node(s) used by no tet", len(mesh.points) - len(points))
+        return cls.oriented(points, used)
 
     @classmethod
-    def read(cls, path) -> "TetMesh":
-        """Read any volume mesh format meshio knows (.vtu, .msh, .mesh, .xdmf, ...)."""
+    def read(cls, path, *, units: str = "m", scale=None) -> "TetMesh":
+        """Read any volume mesh format meshio knows (.vtu, .msh, .mesh, .xdmf, ...).
+
+        Parameters
+        ----------
+        path : path-like
+            The mesh file; its extension names the format (``.msh`` is gmsh's).
+        units : {"m", "cm", "mm"}
+            The length unit of the file's coordinates; they are converted to metres.
+        scale : float, optional
+            A further factor on the coordinates; the factor to metres is ``UNITS[units] * scale``
+            (:func:`volspring.units.length_factor`).
+
+        Returns
+        -------
+        TetMesh
+            Node positions in metres.
+
+        Raises
+        ------
+        ValueError
+            For bad ``units`` or ``scale`` (checked before the file is opened), a file meshio cannot
+            read, no tets, or a mesh :meth:`from_meshio` refuses (tangled, too large, ...).
+        FileNotFoundError
+            When there is no file at ``path``.
+
+        Warns
+        -----
+        UserWarning
+            When read in metres with no explicit ``scale`` and more than 10 m across: probably
+            millimetres (:func:`volspring.units.warn_if_large`).
+        """
         import meshio
 
+        from volspring.units import length_factor, scaled_points, warn_if_large
+
+        factor = length_factor(units, scale)
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"no mesh file at {path}")
@@ -261,20 +399,157 @@ class TetMesh:
         except (SystemExit, Exception) as error:
             detail = " ".join(chatter.getvalue().split()) or f"{type(error).__name__}: {error}"
             raise ValueError(f"cannot read {path} as a {file_format} mesh ({detail})") from None
-        return cls.from_meshio(mesh)
+        mesh.points = scaled_points(mesh.points, factor, name=os.fspath(path))
+        result = cls.from_meshio(mesh)
+        warn_if_large(result.points, units=units, scale=scale, name=os.fspath(path))
+        return result
 
     def write(self, path, *, point_data=None, cell_data=None, file_format=None) -> Path:
-        """Write the mesh in the format its extension names, atomically (temp file, then rename)."""
+        """Write the mesh in the format its extension names, atomically (temporary names, then renames).
+
+        XDMF (``.xdmf``, ``.xmf``) is two files: the XML ``stem.xdmf`` and its heavy data ``stem.h5``
+        beside it, which the XML names by that relative file name, so the pair can be moved together.
+        Both are written under a temporary folder beside ``path`` and renamed into place, the ``.h5``
+        first; a rewrite replaces the pair and leaves nothing else behind.
+
+        Parameters
+        ----------
+        path : path-like
+            The file to write; missing parent folders are created.
+        point_data : dict of str to (n, ...) array, optional
+            Values per node.
+        cell_data : dict of str to (m, ...) array, optional
+            Values per tet.
+        file_format : str, optional
+            meshio's format name (default: from the extension, :func:`mesh_file_format`).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         import meshio
 
         path = Path(path)
+        file_format = file_format or mesh_file_format(path)
+        mesh = self.to_meshio(point_data=point_data, cell_data=cell_data)
+        if file_format == "xdmf":
+            _write_xdmf(path, mesh)
+            return path
         with atomic_path(path) as tmp:
-            meshio.write(tmp, self.to_meshio(point_data=point_data, cell_data=cell_data),
-                         file_format=file_format or mesh_file_format(path))
+            meshio.write(tmp, mesh, file_format=file_format)
         return path
 
     def __repr__(self) -> str:
         return f"TetMesh({self.node_count} nodes, {self.tet_count} tets, volume {self.volume:.6g})"
+
+
+#: Tets with |V| <= ZERO_VOLUME * l^3, for l their largest coordinate extent, are flat: round-off of a
+#: determinant of edges of length l is ~1e-16 l^3, so 1e-12 leaves four orders of margin.
+ZERO_VOLUME = 1e-12
+#: Coordinates up to about this size [m] keep tet volumes (cubes of edge lengths, up to twice the
+#: coordinates) below float64's largest number, 1.8e308: the cube root of that, halved.
+LARGEST_COORDINATE = float(np.cbrt(np.finfo(np.float64).max) / 2)
+#: A mesh must be at least this large across [m] for the zero-volume test (ZERO_VOLUME l^3) not to
+#: underflow below float64's smallest normal number.
+SMALLEST_EXTENT = float(np.cbrt(np.finfo(np.float64).tiny / ZERO_VOLUME))
+
+
+def _geometry_ready(points, tets) -> bool:
+    """Whether the arrays have the shapes, index range and finite coordinates the geometry below needs
+    (when not, the constructor names what is wrong)."""
+    return (points.ndim == 2 and points.shape[1] == 3 and np.issubdtype(tets.dtype, np.integer) and tets.ndim == 2
+            and tets.shape[1] == 4 and len(tets) > 0 and tets.min() >= 0 and tets.max() < len(points)
+            and bool(np.isfinite(points).all()))
+
+
+def _volumes_and_extents(points, tets):
+    """Signed volumes and largest extents (m,) of the tets, refusing coordinates float64 cannot cube.
+
+    Coordinates around 1e103 make the volumes overflow to inf (or nan), and coordinates around 1e-99
+    make them underflow to 0; either way the problem is the scale of the coordinates, not flat tets.
+    The arrays must pass :func:`_geometry_ready`.
+    """
+    with np.errstate(over="ignore", invalid="ignore", under="ignore"):
+        volumes = signed_tet_volumes(points, tets)
+        extent = np.ptp(points[tets], axis=1).max(axis=1)
+        cubed = extent**3
+    if not (np.isfinite(volumes).all() and np.isfinite(cubed).all()):
+        magnitude = np.abs(points).max(axis=1)
+        node = int(np.argmax(magnitude))
+        raise ValueError(
+            f"coordinates too large: the largest absolute coordinate is {magnitude[node]:.3g} (node {node}), and "
+            f"tet volumes must be finite in float64 (below {np.finfo(np.float64).max:.3g} m^3): expected "
+            f"coordinates below about {LARGEST_COORDINATE:.3g} m; are they in the right units?"
+        )
+    across = float(np.ptp(points, axis=0).max())
+    if 0 < across < SMALLEST_EXTENT:
+        raise ValueError(
+            f"coordinates too small: the mesh is {across:.3g} across, and tet volumes underflow float64: expected "
+            f"a mesh at least {SMALLEST_EXTENT:.3g} m across; are the coordinates in the right units?"
+        )
+    return volumes, extent
+
+
+def _used_nodes(points, tets):
+    """The nodes the tets use, renumbered in their original order, and the renumbered tets."""
+    points = np.asarray(points, dtype=np.float64)
+    tets = np.asarray(tets)
+    if not np.issubdtype(tets.dtype, np.integer) or tets.size == 0:
+        return points, tets  # the constructor says what is wrong
+    used, inverse = np.unique(tets.ravel(), return_inverse=True)
+    if used[0] < 0 or used[-1] >= len(points):
+        return points, tets  # out of range: the constructor names the range
+    return points[used], inverse.reshape(tets.shape).astype(np.int64)
+
+
+def _positive_order(tets, negative):
+    """(m, 4) int64 -- ``tets`` with the last two nodes of the ``negative`` ones swapped."""
+    tets = np.array(tets, dtype=np.int64, copy=True)
+    tets[negative, 2:] = tets[negative, 3:1:-1]
+    return tets
+
+
+def _tangled_faces(tets) -> np.ndarray:
+    """(k, 2) int64 -- pairs of positively oriented tets that lie on the same side of a face they share.
+
+    Each tet winds its faces outward (``TET_FACES``); two tets on opposite sides of a shared face wind it
+    in opposite directions, two on the same side (overlapping) in the same one. A face's direction is the
+    parity of the permutation that sorts its three nodes.
+    """
+    faces = tets[:, TET_FACES].reshape(-1, 3)
+    parity = ((faces[:, 0] > faces[:, 1]).astype(np.int8) + (faces[:, 0] > faces[:, 2])
+              + (faces[:, 1] > faces[:, 2])) % 2
+    key = np.sort(faces, axis=1)
+    order = np.lexsort(key.T[::-1])
+    key, parity = key[order], parity[order]
+    same_face = (key[1:] == key[:-1]).all(axis=1)
+    same_side = np.flatnonzero(same_face & (parity[1:] == parity[:-1]))
+    return np.stack([order[same_side] // 4, order[same_side + 1] // 4], axis=1)
+
+
+def _write_xdmf(path: Path, mesh) -> None:
+    """Write ``stem.xdmf`` and ``stem.h5`` atomically, the XML naming the heavy data by its relative name.
+
+    meshio names the ``.h5`` after the ``.xdmf`` it writes and refers to it by file name: writing both
+    under their final names inside a temporary folder beside ``path``, then renaming them out (the
+    ``.h5`` first, so the new XML never names missing data), gives a pair that refers to each other
+    correctly, on the same file system as the target, and leaves no temporary file behind.
+    """
+    import shutil
+    import tempfile
+
+    import meshio
+
+    heavy = path.with_suffix(".h5")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    folder = Path(tempfile.mkdtemp(prefix=f".{path.stem}.", suffix=".xdmf-tmp", dir=path.parent))
+    try:
+        meshio.write(folder / path.name, mesh, file_format="xdmf")
+        os.replace(folder / heavy.name, heavy)
+        os.replace(folder / path.name, path)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 #: meshio lists several formats for some extensions, and not the one users mean first (.msh -> ansys).
