@@ -274,3 +274,37 @@ def test_an_interrupted_run_says_where_it_stopped_in_one_line(tmp_path, signal_n
     assert lines[0].endswith(f"--resume {out / 'checkpoint.npz'}")
     assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary file left
     assert load_checkpoint(out / "checkpoint.npz").step > 0
+
+
+def test_units_convert_the_input_and_the_lengths_given_with_it(tmp_path, capsys, beam_file):
+    # The same beam drawn in millimetres, pinned by a box in millimetres: the same run as in metres.
+    millimetres = tmp_path / "beam_mm.vtu"
+    metres = cube_mesh((4, 1, 1), size=(0.2, 0.05, 0.05))
+    type(metres)(metres.points * 1000.0, metres.tets).write(millimetres)
+    status, out_m, _ = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.02", "--no-progress")
+    assert status == 0
+    status, out_mm, err = run(capsys, millimetres, "--units", "mm", "--pin", "-1000,-1000,-1000,0,1000,1000", *FAST,
+                              "--duration", "0.02", "--no-progress")
+    assert status == 0 and err == ""
+    mass = re.compile(r"mass ([\d.e+-]+) kg, (\d+) pinned")
+    assert mass.search(out_mm).groups() == mass.search(out_m).groups()  # 0.5 kg of rubber, not 5e8 kg
+    sag = re.compile(r"max displacement ([\d.e+-]+) m")
+    # Coordinates x1000 then x0.001 differ from the metre file by round-off (1e-16 relative), which the
+    # run carries along; six printed digits do not see it.
+    assert sag.search(out_mm).group(1) == sag.search(out_m).group(1)
+
+
+def test_a_huge_body_read_in_metres_gets_a_one_line_warning(tmp_path, capsys):
+    huge = tmp_path / "beam_mm.vtu"
+    mesh = cube_mesh((4, 1, 1), size=(0.2, 0.05, 0.05))
+    type(mesh)(mesh.points * 1000.0, mesh.tets).write(huge)  # a 200 mm beam, read as 200 m
+    status, _, err = run(capsys, huge, "--pin", "-1,-1,-1,0,1000,1000", *FAST, "--duration", "0.01", "--quiet")
+    assert status == 0
+    assert err.startswith("volspring-sim: warning: ") and "--units mm" in err and len(err.splitlines()) == 1
+
+
+def test_a_shape_in_millimetres(tmp_path, capsys):
+    status, out, err = run(capsys, "box:200,50,50", "--units", "mm", "--size", "50", "--pin", "-100,-100,-100,-100,100,100",
+                           *FAST, "--duration", "0.01", "--no-progress")
+    assert status == 0, err
+    assert "box:0.2,0.05,0.05 meshed" in out and "mass 0.55 kg" in out  # 5e-4 m^3 of 1100 kg/m^3 rubber

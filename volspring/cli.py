@@ -69,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     from volspring.integrators import INTEGRATORS
     from volspring.model import STIFFNESS_RULES
     from volspring.simulate import RUNAWAY_CHECKS, RUNAWAY_FACTOR
+    from volspring.units import add_unit_arguments
 
     parser = _Parser(prog=PROG, description="Simulate a volumetric soft body as a tetrahedral mass-spring model.",
                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -76,10 +77,12 @@ def build_parser() -> argparse.ArgumentParser:
                         help="a volume mesh file (.msh, .vtu, .mesh, ...) or a built-in shape NAME:D1,D2,... "
                              "such as box:1,0.1,0.1 or sphere:0.5 [m]")
     body = parser.add_argument_group("body")
-    body.add_argument("--size", type=float, help="tet edge length for a built-in shape [m] "
+    body.add_argument("--size", type=float, help="tet edge length for a built-in shape, in --units "
                                                  "(default: a tenth of its extent, at most half its smallest side)")
     body.add_argument("--mesher", choices=("gmsh", "delaunay"), default="gmsh", help="mesher for a built-in shape")
     body.add_argument("--seed", type=int, help="random seed of the mesher")
+    add_unit_arguments(body, applies_to="INPUT (a mesh file's coordinates or a shape's dimensions), --size, --pin "
+                                        "boxes and --render-surface", scale_applies_to="INPUT and --render-surface")
     body.add_argument("--E", type=float, default=1e6, help="Young's modulus [Pa] (soft rubber)")
     body.add_argument("--nu", type=float, default=None,
                       help=f"Poisson's ratio [-] (default {DEFAULT_NU}); the spring rules ignore it: pure springs have "
@@ -93,7 +96,7 @@ def build_parser() -> argparse.ArgumentParser:
     scene.add_argument("--gravity", default="0,0,-9.81", help="gravity gx,gy,gz [m/s^2], or 'off'")
     scene.add_argument("--drag", type=float, default=0.0, help="global viscous drag rate [1/s]")
     scene.add_argument("--pin", action="append", default=[], metavar="XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX",
-                       help="pin the nodes inside this box [m] (repeatable)")
+                       help="pin the nodes inside this box, in --units (repeatable)")
     run = parser.add_argument_group("run")
     run.add_argument("--integrator", choices=tuple(INTEGRATORS), default="implicit_euler")
     run.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
@@ -311,8 +314,9 @@ def _load_mesh(args):
     if path.is_file():
         if args.size is not None:
             raise _InputError(f"--size applies to built-in shapes only; {path} is already a tet mesh")
-        return _read_mesh(path), str(path)
-    from meshing.shapes import SHAPE_NAMES, looks_like_shape, parse_shape  # an application may use meshing
+        return _read_mesh(path, args.units, args.scale), str(path)
+    from meshing.shapes import SHAPE_NAMES, Shape, looks_like_shape, parse_shape  # an application may use meshing
+    from volspring.units import UNITS, length_factor
 
     if not looks_like_shape(args.input):
         raise _InputError(f"INPUT {args.input!r} is neither a mesh file nor a built-in shape NAME:D1,D2,... "
@@ -320,8 +324,12 @@ def _load_mesh(args):
     from meshing.tetrahedralize import tetrahedralize
 
     shape = parse_shape(args.input)
+    factor = length_factor(args.units, args.scale)
+    if factor != 1.0:
+        shape = Shape(shape.name, tuple(dimension * factor for dimension in shape.dimensions))
     low, high = shape.bounds
-    size = args.size if args.size is not None else min(shape.extent / 10.0, float((high - low).min()) / 2.0)
+    size = (args.size * UNITS[args.units] if args.size is not None
+            else min(shape.extent / 10.0, float((high - low).min()) / 2.0))
     try:
         mesh = tetrahedralize(shape, size=size, method=args.mesher, seed=args.seed)
     except ValueError:
@@ -331,11 +339,11 @@ def _load_mesh(args):
     return mesh, f"{shape.spec()} meshed by {args.mesher} at size {size:g} m"
 
 
-def _read_mesh(path):
+def _read_mesh(path, units, scale):
     from volspring.mesh import TetMesh
 
     try:
-        return TetMesh.read(path)
+        return TetMesh.read(path, units=units, scale=scale)
     except (ValueError, FileNotFoundError) as error:
         raise _InputError(str(error)) from error
 
@@ -362,7 +370,9 @@ def _build_scene(args, model):
         forces.append(Gravity(model.masses, tuple(gravity)))
     if args.drag:
         forces.append(Drag(model.masses, args.drag))
-    pins = _pinned_nodes(args.pin, model.rest_positions)
+    from volspring.units import UNITS
+
+    pins = _pinned_nodes(args.pin, model.rest_positions, UNITS[args.units])
     return Scene(model, forces=forces, pins=None if pins is None else Pins(pins))
 
 
@@ -383,15 +393,17 @@ def _numbers(text, count, option, form) -> np.ndarray:
     return values
 
 
-def _pinned_nodes(boxes, points):
-    """Nodes inside any of the boxes (faces included, up to round-off), or None without boxes."""
+def _pinned_nodes(boxes, points, unit=1.0):
+    """Nodes inside any of the boxes (faces included, up to round-off), or None without boxes.
+
+    ``points`` are in metres, the boxes' numbers in a unit of ``unit`` metres."""
     if not boxes:
         return None
     low_all, high_all = points.min(axis=0), points.max(axis=0)
     slack = PIN_TOLERANCE * float(np.linalg.norm(high_all - low_all))
     selected = np.zeros(len(points), dtype=bool)
     for text in boxes:
-        box = _numbers(text, 6, "--pin", "xmin,ymin,zmin,xmax,ymax,zmax")
+        box = _numbers(text, 6, "--pin", "xmin,ymin,zmin,xmax,ymax,zmax") * unit
         low, high = box[:3], box[3:]
         if (low > high).any():
             axis = "xyz"[int(np.flatnonzero(low > high)[0])]
@@ -423,18 +435,20 @@ def _writers(args, model, first_frame):
         return []
     writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame)]
     if args.blender:
-        surface = model if args.render_surface is None else _anchored_surface(args.render_surface, model)
+        surface = (model if args.render_surface is None
+                   else _anchored_surface(args.render_surface, model, args.units, args.scale))
         pc2 = args.out / f"{SURFACE_NAME}.pc2"
         writers.append(BlenderWriter(args.out, surface, name=SURFACE_NAME,
                                      first_frame=first_frame if pc2.is_file() else 0))
     return writers
 
 
-def _anchored_surface(path, model):
+def _anchored_surface(path, model, units, scale):
     """A render surface file bound to the model's tet mesh, vertices in the file's order."""
     import trimesh
 
     from meshing import anchor
+    from volspring.units import length_factor
 
     if not path.is_file():
         raise _InputError(f"no render surface file at {path}")
@@ -445,6 +459,7 @@ def _anchored_surface(path, model):
         raise _InputError(f"cannot read {path} as a surface mesh: {error}") from error
     if len(getattr(surface, "vertices", ())) == 0:
         raise _InputError(f"{path} holds no surface vertices")
+    surface.vertices = surface.vertices * length_factor(units, scale)  # drawn with INPUT, in its units
     return anchor(model.topology.mesh, surface)
 
 
