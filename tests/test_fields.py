@@ -238,7 +238,42 @@ def test_a_scene_pays_only_for_the_fields_it_names(model):
     (lambda: PointRepulser([1.0], (0, 0, 0), 1.0, radius=1.0, falloff="cubic"), "falloff = 'cubic' is not one of"),
     (lambda: Vortex([1.0, -2.0], (0, 0, 0), (0, 0, 1), 1.0, radius=1.0), r"masses\[1\] = -2.0 kg"),
     (lambda: Vortex([1.0], (0, 0), (0, 0, 1), 1.0, radius=1.0), r"point = \(0, 0\) is not a finite 3-vector"),
+    # gusts are rows (A, f, phi): a flat list used to be cut into rows of 3, whatever it meant
+    (lambda: Wind([1.0], (1, 0, 0), 1.0, rate=1.0, gusts=[1.0, 0.5, 0.0, 2.0, 1.0, 0.0]),
+     r"gusts = .* have shape \(6,\); expected \(k, 3\)"),
+    (lambda: Wind([1.0], (1, 0, 0), 1.0, rate=1.0, gusts=[(1.0, 0.5)]), r"have shape \(1, 2\); expected \(k, 3\)"),
+    (lambda: Wind([1.0], (1, 0, 0), 1.0, rate=1.0, gusts=2.0), r"gusts = 2.0 have shape \(\); expected \(k, 3\)"),
+    (lambda: Wind([1.0], (1, 0, 0), 1.0, rate=np.inf), "rate = inf is not finite and >= 0"),
+    (lambda: Wind([1.0], (1, 0, np.nan), 1.0, rate=1.0), r"direction = \(1, 0, nan\) is not a finite 3-vector"),
+    (lambda: Wind([[1.0, 2.0]], (1, 0, 0), 1.0, rate=1.0), r"masses must have shape \(n,\) with n > 0, got \(1, 2\)"),
+    (lambda: PointAttractor([np.nan], (0, 0, 0), 1.0, radius=1.0), r"masses\[0\] = nan kg is not finite and > 0"),
+    (lambda: PointAttractor([1.0], (0, 0, 0, 0), 1.0, radius=1.0), r"centre = \(0, 0, 0, 0\) is not a finite 3-vector"),
+    (lambda: PointAttractor([1.0], (0, 0, 0), np.nan, radius=1.0), "strength = nan is not finite and >= 0"),
+    (lambda: Vortex([1.0], (0, 0, 0), (0, 0, 1), np.inf, radius=1.0), "strength = inf is not a finite number"),
+    (lambda: Vortex([1.0], (0, 0, 0), (0, 0, 1), 1.0, radius=-1.0), "radius = -1.0 is not finite and > 0"),
 ])
 def test_fields_refuse_nonsense(build, message):
     with pytest.raises(ValueError, match=message):
         build()
+
+
+@pytest.mark.parametrize("build, message", [
+    (lambda: Wind([1.0], ("1", 0, 0), 1.0, rate=1.0), r"direction = \('1', 0, 0\) does not hold real numbers"),
+    (lambda: Wind([1.0], (1, 0, 0), "3", rate=1.0), r"speed = '3' is not a real number \(got str\)"),
+    (lambda: Wind([1.0], (1, 0, 0), 1.0, rate=1.0, gusts=[(True, 1.0, 0.0)]), r"gusts = .* holds a bool \(item 0\)"),
+    (lambda: PointAttractor(["1"], (0, 0, 0), 1.0, radius=1.0), r"masses = \['1'\] does not hold real numbers"),
+    (lambda: PointAttractor([1.0], (0, 0, 0), 1.0, radius=1.0, falloff=2), "falloff = 2 is not one of"),
+    (lambda: Vortex([1.0], (0, 0, 0), (True, False, False), 1.0, radius=1.0), r"axis = .* \(got dtype bool\)"),
+])
+def test_fields_refuse_what_is_not_numbers(build, message):
+    with pytest.raises((TypeError, ValueError), match=message) as error:
+        build()
+    # falloff is a choice among names, so a wrong one is a value error; the rest are type errors
+    assert error.type is (ValueError if "falloff" in message else TypeError)
+
+
+def test_a_scene_refuses_a_field_built_for_another_model(model):
+    wind = Wind(model.masses[:-1], (1, 0, 0), 1.0, rate=1.0)
+    with pytest.raises(ValueError, match=rf"forces\[0\] \(Wind\) has {model.node_count - 1} masses, but the model "
+                                         rf"has {model.node_count} nodes"):
+        Scene(model, forces=[wind])

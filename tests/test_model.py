@@ -63,6 +63,62 @@ def test_rule_and_stiffness_are_checked():
         SpringModel.from_arrays(np.eye(3), [0.0, 1, 1], [[0, 1]], stiffness=1.0)
 
 
+TRIANGLE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+
+
+@pytest.mark.parametrize("arguments, error, message", [
+    # spring indices: floats used to be truncated, (k, 3) or (2, s) arrays cut into wrong pairs
+    ({"springs": [[0, 1.7]]}, TypeError, r"springs have dtype float64; expected integer node indices"),
+    ({"springs": [[0, 1, 2], [1, 2, 0]]}, ValueError, r"springs have shape \(2, 3\); expected \(s, 2\)"),
+    ({"springs": [0, 1]}, ValueError, r"springs have shape \(2,\); expected \(s, 2\).*\[\[0, 1\]\] for one spring"),
+    ({"springs": [[0, 1], [2, -1]]}, ValueError, r"springs\[1\] = \[2, -1\] indexes a node outside \[0, 2\] "
+                                                 r"\(the model has 3 nodes; 1 spring\(s\) affected\)"),
+    ({"springs": [[0, 3]]}, ValueError, r"springs\[0\] = \[0, 3\] indexes a node outside \[0, 2\]"),
+    ({"springs": [[0, 1], [2, 2]], "law": "strain"}, ValueError, r"springs\[1\] = \[2, 2\] joins node 2 to itself"),
+    ({"positions": [[0, 0, 0], [0, 0, 0], [0, 1, 0]]}, ValueError,
+     r"springs\[0\] = \[0, 1\] joins two nodes at the same position \[0.0, 0.0, 0.0\] m: its rest length would be 0"),
+    ({"positions": [[0, 0, 0], [1, np.nan, 0], [0, 1, 0]]}, ValueError, r"positions\[1\] = \[1.0, nan, 0.0\] m is not finite"),
+    ({"positions": [[0, 0], [1, 0], [0, 1]]}, ValueError, r"positions must have shape \(n, 3\) with n > 0, got \(3, 2\)"),
+    ({"masses": [1.0, np.nan, 1.0]}, ValueError, r"masses\[1\] = nan is not finite and > 0"),
+    ({"masses": [1.0, -2.0, 1.0]}, ValueError, r"masses\[1\] = -2.0 is not finite and > 0"),
+    ({"masses": [1.0, 1.0]}, ValueError, r"len\(rest_positions\) = 3, but masses have shape \(2,\)"),
+    ({"stiffness": np.nan}, ValueError, r"stiffness\[0\] = nan is not finite and >= 0"),
+    ({"stiffness": [1.0, 2.0, 3.0]}, ValueError, r"stiffness has shape \(3,\); expected a number or shape \(2,\)"),
+    ({"damping": -1.0}, ValueError, r"damping\[0\] = -1.0 is not finite and >= 0"),
+    ({"rest_lengths": [1.0, 0.0]}, ValueError, r"rest_lengths\[1\] = 0.0 is not finite and > 0"),
+    ({"law": "linear"}, ValueError, "unknown force law 'linear'; known: hooke, strain"),
+])
+def test_from_arrays_refuses_what_it_would_misread(arguments, error, message):
+    given = {"positions": TRIANGLE, "masses": np.ones(3), "springs": [[0, 1], [1, 2]], "stiffness": 10.0, **arguments}
+    with pytest.raises(error, match=message):
+        SpringModel.from_arrays(given.pop("positions"), given.pop("masses"), given.pop("springs"), **given)
+
+
+def test_from_mesh_refuses_what_it_would_ignore_or_misread():
+    mesh = cube_mesh((1, 1, 1))
+    with pytest.raises(TypeError, match="body must be a TetMesh or SpringTopology, got str"):
+        SpringModel.from_mesh("cube.msh", STEEL_LIKE)
+    with pytest.raises(TypeError, match="material must be a volspring.Material, got dict"):
+        SpringModel.from_mesh(mesh, {"E": 1e5})
+    # law= reads the raw uniform constant; with a material rule it used to be ignored silently
+    with pytest.raises(ValueError, match="law='strain' applies to rule='uniform' only: rule='van_gelder' gives"):
+        SpringModel.from_mesh(mesh, STEEL_LIKE, law="strain")
+    with pytest.raises(ValueError, match="unknown force law 'strian'"):
+        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=1.0, law="strian")
+    with pytest.raises(ValueError, match="stiffness = nan is not finite and >= 0"):
+        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=float("nan"))
+    with pytest.raises(ValueError, match="damping_ratio = -0.1 is not finite and >= 0"):
+        SpringModel.from_mesh(mesh, STEEL_LIKE, damping_ratio=-0.1)
+    with pytest.raises(ValueError, match=r"damping has shape \(2,\); expected a number or shape \(19,\)"):
+        SpringModel.from_mesh(mesh, STEEL_LIKE, damping=[1.0, 2.0])
+
+
+@pytest.mark.parametrize("bad, error", [(True, TypeError), ("1e5", TypeError), (np.inf, ValueError)])
+def test_material_refuses_what_is_not_a_finite_number(bad, error):
+    with pytest.raises(error, match=r"^E = .*(is not a real number|is not a finite number)"):
+        Material(E=bad, nu=0.3, density=1.0)
+
+
 def test_damping_ratio_gives_critical_damping_for_one_spring():
     model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [2.0, 2.0], [[0, 1]], stiffness=50.0)
     topology = SpringTopology.from_mesh(cube_mesh((1, 1, 1)))

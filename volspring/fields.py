@@ -21,6 +21,12 @@ Fields
     a swirl around an axis, tangential, smooth on the axis and decaying as 1/rho far from it.
 :class:`CallableForce`
     a user function ``f(x, v, t) -> (n, 3)`` forces [N], checked for shape and finiteness.
+
+Constructors check their input: a TypeError for what is not numbers (bools, strings), a
+ValueError for vectors that are not finite 3-vectors, masses that are not a finite, positive
+(n,) array, and parameters that are not finite or out of range, each naming the value. Numpy
+scalars (``np.float32(2.0)``) count as numbers. A :class:`~volspring.Scene` checks that the
+masses have one entry per node of its model.
 """
 
 from __future__ import annotations
@@ -32,39 +38,48 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from volspring.material import _real_array, _real_number, _shown
+
 __all__ = ["Wind", "PointAttractor", "PointRepulser", "Vortex", "CallableForce", "POINT_FALLOFFS"]
 
 POINT_FALLOFFS = ("inverse_square", "linear")
 
 
 # ---------------------------------------------------------------------------- input checks
-def _masses(masses) -> np.ndarray:
-    masses = np.array(masses, dtype=np.float64)
+# Shared by the forces of volspring.scene (Gravity, Drag): TypeError for what is not numbers at
+# all (bools, strings, from volspring.material), ValueError for numbers of the wrong shape or
+# range, naming the value.
+def _masses(masses, *, allow_zero=False) -> np.ndarray:
+    """(n,) float, read-only -- node masses, finite and > 0 (>= 0 with ``allow_zero``) [kg]."""
+    masses = _real_array("masses", masses)
     if masses.ndim != 1 or masses.size == 0:
         raise ValueError(f"masses must have shape (n,) with n > 0, got {masses.shape}")
-    bad = ~np.isfinite(masses) | (masses <= 0)
+    bad = ~np.isfinite(masses) | (masses < 0) | ((masses == 0) & (not allow_zero))
     if bad.any():
         first = int(np.flatnonzero(bad)[0])
-        raise ValueError(f"masses[{first}] = {masses[first]} kg is not finite and > 0")
+        expected = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"masses[{first}] = {masses[first]} kg is not finite and {expected}")
     masses.setflags(write=False)
     return masses
 
 
 def _vector(name, value, *, unit=False) -> np.ndarray:
-    vector = np.array(value, dtype=np.float64)
+    """(3,) float, read-only -- a finite 3-vector (normalised with ``unit``)."""
+    vector = _real_array(name, value)
     if vector.shape != (3,) or not np.isfinite(vector).all():
-        raise ValueError(f"{name} = {value!r} is not a finite 3-vector")
+        raise ValueError(f"{name} = {_shown(value)} is not a finite 3-vector (got shape {vector.shape})")
     if unit:
         norm = np.linalg.norm(vector)
         if norm == 0:
-            raise ValueError(f"{name} = {value!r} has zero length; expected a direction")
+            raise ValueError(f"{name} = {_shown(value)} has zero length; expected a direction")
         vector = vector / norm
     vector.setflags(write=False)
     return vector
 
 
 def _finite(name, value, *, positive=False, nonnegative=False) -> float:
-    value = float(value)
+    """A finite real number (> 0 with ``positive``, >= 0 with ``nonnegative``) as a float."""
+    value = _real_number(name, value)
     if positive and not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name} = {value} is not finite and > 0")
     if nonnegative and not (math.isfinite(value) and value >= 0):
@@ -72,6 +87,13 @@ def _finite(name, value, *, positive=False, nonnegative=False) -> float:
     if not math.isfinite(value):
         raise ValueError(f"{name} = {value} is not a finite number")
     return value
+
+
+def _flag(name, value) -> bool:
+    """A bool (Python or numpy); a TypeError naming ``name`` for anything else ("no" is not False)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} = {_shown(value)} is not a bool")
+    return bool(value)
 
 
 def _block_diagonal(blocks) -> sp.csr_matrix:
@@ -106,7 +128,8 @@ class Wind:
     direction : (3,) float -- direction the wind blows towards [-], normalised here
     speed : float or callable -- mean wind speed [m/s], or ``speed(t) -> float`` [m/s] at time t [s]
     rate : float -- coupling rate c [1/s], >= 0 (keyword-only)
-    gusts : sequence of (A, f, phi) -- gust amplitude [m/s], frequency [Hz], phase [rad]
+    gusts : (k, 3) float -- one row (A, f, phi) per gust: amplitude [m/s], frequency [Hz],
+        phase [rad] (keyword-only; a single gust is ``[(A, f, phi)]``)
 
     Notes
     -----
@@ -138,9 +161,14 @@ class Wind:
         if not callable(self.speed):
             object.__setattr__(self, "speed", _finite("speed", self.speed))
         object.__setattr__(self, "rate", _finite("rate", self.rate, nonnegative=True))
-        gusts = np.array(self.gusts, dtype=np.float64).reshape(-1, 3) if len(self.gusts) else np.zeros((0, 3))
+        gusts = _real_array("gusts", self.gusts)
+        if gusts.size == 0:
+            gusts = np.zeros((0, 3))
+        if gusts.ndim != 2 or gusts.shape[1] != 3:
+            raise ValueError(f"gusts = {_shown(self.gusts)} have shape {gusts.shape}; expected (k, 3): "
+                             "one (amplitude [m/s], frequency [Hz], phase [rad]) per gust, e.g. [(1.0, 0.5, 0.0)]")
         if not np.isfinite(gusts).all():
-            raise ValueError(f"gusts = {self.gusts!r} hold non-finite values")
+            raise ValueError(f"gusts = {_shown(self.gusts)} hold non-finite values")
         gusts.setflags(write=False)
         object.__setattr__(self, "gusts", gusts)
 
@@ -226,13 +254,13 @@ class PointAttractor:
     sign = 1.0  # a class constant, not a field: -1 for PointRepulser
 
     def __post_init__(self):
-        if self.falloff not in POINT_FALLOFFS:
+        if not isinstance(self.falloff, str) or self.falloff not in POINT_FALLOFFS:
             raise ValueError(f"falloff = {self.falloff!r} is not one of {', '.join(POINT_FALLOFFS)}")
         object.__setattr__(self, "masses", _masses(self.masses))
         object.__setattr__(self, "centre", _vector("centre", self.centre))
         object.__setattr__(self, "strength", _finite("strength", self.strength, nonnegative=True))
         object.__setattr__(self, "radius", _finite("radius", self.radius, positive=True))
-        object.__setattr__(self, "clamp_jacobian", bool(self.clamp_jacobian))
+        object.__setattr__(self, "clamp_jacobian", _flag("clamp_jacobian", self.clamp_jacobian))
 
     def _geometry(self, x):
         d = self.centre - x
@@ -394,7 +422,9 @@ class CallableForce:
 
     def __init__(self, function: Callable, *, name: str | None = None):
         if not callable(function):
-            raise TypeError(f"function = {function!r} is not callable; expected f(x, v, t) -> (n, 3) forces")
+            raise TypeError(f"function = {_shown(function)} is not callable; expected f(x, v, t) -> (n, 3) forces")
+        if name is not None and not isinstance(name, str):
+            raise TypeError(f"name = {_shown(name)} is not a str")
         self.function = function
         self.name = name or getattr(function, "__name__", type(function).__name__)
 

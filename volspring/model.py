@@ -43,7 +43,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from volspring.material import Material
+from volspring.material import Material, _real_array, _real_number, _shown
 from volspring.mesh import TetMesh
 from volspring.topology import SPRING_KINDS, SpringTopology, vector_lengths
 
@@ -73,12 +73,59 @@ def _pair_index(springs, node_count, pairs):
 
 
 def _as_spring_array(name, value, count, *, allow_zero):
-    array = np.broadcast_to(np.asarray(value, dtype=np.float64), (count,)).copy()
+    """(count,) float -- a number or array of numbers broadcast to one per spring (or node), checked."""
+    array = _real_array(name, value)
+    try:
+        array = np.broadcast_to(array, (count,)).copy()
+    except ValueError:
+        raise ValueError(f"{name} has shape {array.shape}; expected a number or shape ({count},)") from None
     bad = ~np.isfinite(array) | (array < 0) | ((array == 0) & (not allow_zero))
     if bad.any():
         first = np.flatnonzero(bad)[0]
         expected = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"{name}[{first}] = {array[first]} is not finite and {expected}")
+    return array
+
+
+def _checked_positions(name, value) -> np.ndarray:
+    """(n, 3) float -- finite node positions [m], n > 0."""
+    x = _real_array(name, value)
+    if x.ndim != 2 or x.shape[1] != 3 or len(x) == 0:
+        raise ValueError(f"{name} must have shape (n, 3) with n > 0, got {x.shape}")
+    bad = ~np.isfinite(x).all(axis=1)
+    if bad.any():
+        node = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"{name}[{node}] = {x[node].tolist()} m is not finite ({int(bad.sum())} node(s) "
+                         "with non-finite coordinates)")
+    return x
+
+
+def _checked_springs(springs, node_count) -> np.ndarray:
+    """(s, 2) int64 -- node pairs: integers in [0, node_count), each joining two different nodes."""
+    try:
+        array = np.asarray(springs)
+    except ValueError as error:  # ragged nested sequences
+        raise ValueError(f"springs = {_shown(springs)} is not a regular (s, 2) array: {error}") from None
+    if array.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if array.dtype.kind not in "iu":
+        raise TypeError(f"springs have dtype {array.dtype}; expected integer node indices (first pair "
+                        f"{array.reshape(-1)[:2].tolist()}; integer-valued floats convert with "
+                        "np.asarray(springs, dtype=int))")
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise ValueError(f"springs have shape {array.shape}; expected (s, 2), one node pair per spring "
+                         "(e.g. [[0, 1]] for one spring)")
+    array = array.astype(np.int64)
+    outside = ((array < 0) | (array >= node_count)).any(axis=1)
+    if outside.any():
+        e = int(np.flatnonzero(outside)[0])
+        raise ValueError(f"springs[{e}] = {array[e].tolist()} indexes a node outside [0, {node_count - 1}] "
+                         f"(the model has {node_count} nodes; {int(outside.sum())} spring(s) affected)")
+    loops = array[:, 0] == array[:, 1]
+    if loops.any():
+        e = int(np.flatnonzero(loops)[0])
+        raise ValueError(f"springs[{e}] = {array[e].tolist()} joins node {array[e, 0]} to itself; "
+                         "expected two different nodes")
     return array
 
 
@@ -99,7 +146,11 @@ class SpringModel:
     material : Material or None
     rule : str -- the stiffness rule used, or "arrays"
 
-    Use :meth:`from_mesh` or :meth:`from_arrays` rather than the constructor.
+    Use :meth:`from_mesh` or :meth:`from_arrays` rather than the constructor. All three refuse
+    input they would misread: a TypeError for what is not numbers (bools, strings; numpy
+    scalars are numbers) or for non-integer spring indices, a ValueError for wrong shapes,
+    non-finite values, masses <= 0, negative stiffness or damping, rest lengths <= 0, and
+    springs that leave the node range or join a node to itself, naming the first offender.
 
     Examples
     --------
@@ -122,19 +173,11 @@ class SpringModel:
     rule: str = "arrays"
 
     def __post_init__(self):
-        x = np.array(self.rest_positions, dtype=np.float64)
+        x = _checked_positions("rest_positions", self.rest_positions)
         n = len(x)
-        if x.ndim != 2 or x.shape[1] != 3 or n == 0:
-            raise ValueError(f"rest_positions must have shape (n, 3) with n > 0, got {x.shape}")
-        if not np.isfinite(x).all():
-            raise ValueError("rest_positions hold non-finite coordinates")
-        springs = np.array(self.springs, dtype=np.int64).reshape(-1, 2)
+        springs = _checked_springs(self.springs, n)
         s = len(springs)
-        if s and (springs.min() < 0 or springs.max() >= n):
-            raise ValueError(f"springs index nodes in [{springs.min()}, {springs.max()}], expected [0, {n - 1}]")
-        if s and (springs[:, 0] == springs[:, 1]).any():
-            raise ValueError(f"spring {np.flatnonzero(springs[:, 0] == springs[:, 1])[0]} joins a node to itself")
-        masses = np.array(self.masses, dtype=np.float64).ravel()
+        masses = _real_array("masses", self.masses).ravel()
         if masses.shape != (n,):
             raise ValueError(f"len(rest_positions) = {n}, but masses have shape {masses.shape}")
         masses = _as_spring_array("masses", masses, n, allow_zero=False)
@@ -144,6 +187,9 @@ class SpringModel:
             "rest_lengths": _as_spring_array("rest_lengths", self.rest_lengths, s, allow_zero=False),
         }
         kinds = np.broadcast_to(np.asarray(self.kinds, dtype=np.int8), (s,)).copy()
+        if s and (kinds.min() < 0 or kinds.max() >= len(SPRING_KINDS)):
+            raise ValueError(f"kinds hold {kinds.min()} to {kinds.max()}; expected indices into SPRING_KINDS, "
+                             f"0 to {len(SPRING_KINDS) - 1}")
         for name, array in (("rest_positions", x), ("masses", masses), ("springs", springs), ("kinds", kinds),
                             *values.items()):
             array.setflags(write=False)
@@ -164,16 +210,31 @@ class SpringModel:
         damping : float or (s,) float -- k_d [N s/m]
         rest_lengths : (s,) float, optional -- defaults to the distances in ``positions`` [m]
         law : {"hooke", "strain"}
+
+        Raises
+        ------
+        TypeError
+            Numbers that are not numbers (bools, strings), spring indices that are not integers.
+        ValueError
+            See the class docstring; in particular a spring between two nodes at the same
+            position without ``rest_lengths`` (its rest length would be 0), naming the spring.
         """
-        positions = np.asarray(positions, dtype=np.float64)
-        springs = np.asarray(springs, dtype=np.int64).reshape(-1, 2)
+        positions = _checked_positions("positions", positions)
+        springs = _checked_springs(springs, len(positions))
+        if law not in FORCE_LAWS:
+            raise ValueError(f"unknown force law {law!r}; known: {', '.join(FORCE_LAWS)}")
         if rest_lengths is None:
-            if springs.size and (springs.min() < 0 or springs.max() >= len(positions)):
-                raise ValueError(f"springs index nodes in [{springs.min()}, {springs.max()}], "
-                                 f"expected [0, {len(positions) - 1}]")
             rest_lengths = vector_lengths(positions[springs[:, 1]] - positions[springs[:, 0]])
+            if (rest_lengths == 0).any():
+                e = int(np.flatnonzero(rest_lengths == 0)[0])
+                i, j = springs[e]
+                raise ValueError(f"springs[{e}] = [{i}, {j}] joins two nodes at the same position "
+                                 f"{positions[i].tolist()} m: its rest length would be 0; expected distinct "
+                                 "positions, or rest_lengths > 0")
+        else:
+            rest_lengths = _as_spring_array("rest_lengths", rest_lengths, len(springs), allow_zero=False)
         stiffness = _as_spring_array("stiffness", stiffness, len(springs), allow_zero=True)
-        stiffness = _effective_stiffness(stiffness, np.asarray(rest_lengths, dtype=np.float64), law)
+        stiffness = _effective_stiffness(stiffness, rest_lengths, law)
         return cls(positions, masses, springs, stiffness, damping, rest_lengths, kinds=0)
 
     @classmethod
@@ -186,23 +247,38 @@ class SpringModel:
         body : TetMesh or SpringTopology
         material : Material
         rule : {"van_gelder", "lloyd", "uniform"} -- stiffness rule (see the module docstring)
-        stiffness : float, optional -- the raw constant, required by ``rule="uniform"`` only
-        law : {"hooke", "strain"} -- how the raw ``uniform`` constant is read
+        stiffness : float, optional -- the raw constant, >= 0, required by ``rule="uniform"`` only
+        law : {"hooke", "strain"} -- how the raw ``uniform`` constant is read (``uniform`` only)
         damping_ratio : float, optional -- zeta >= 0 per spring (see the module docstring)
         damping : float or (s,) float, optional -- k_d [N s/m], instead of ``damping_ratio``
         """
+        if not isinstance(body, (TetMesh, SpringTopology)):
+            raise TypeError(f"body must be a TetMesh or SpringTopology, got {type(body).__name__}")
         topology = body if isinstance(body, SpringTopology) else SpringTopology.from_mesh(body)
         if not isinstance(topology.mesh, TetMesh):
             raise TypeError(f"body must be a TetMesh or SpringTopology, got {type(body).__name__}")
         if not isinstance(material, Material):
             raise TypeError(f"material must be a volspring.Material, got {type(material).__name__}")
-        if rule not in STIFFNESS_RULES:
+        if not isinstance(rule, str) or rule not in STIFFNESS_RULES:
             raise ValueError(f"unknown stiffness rule {rule!r}; known: {', '.join(STIFFNESS_RULES)}")
         if (rule == "uniform") != (stiffness is not None):
             raise ValueError("stiffness= is required by rule='uniform' and only by it"
                              f" (rule={rule!r}, stiffness={stiffness!r})")
+        if not isinstance(law, str) or law not in FORCE_LAWS:
+            raise ValueError(f"unknown force law {law!r}; known: {', '.join(FORCE_LAWS)}")
+        if law != "hooke" and rule != "uniform":
+            raise ValueError(f"law={law!r} applies to rule='uniform' only: rule={rule!r} gives the stiffness "
+                             "k_e [N/m] directly")
+        if stiffness is not None:
+            stiffness = _real_number("stiffness", stiffness)
+            if not (np.isfinite(stiffness) and stiffness >= 0):
+                raise ValueError(f"stiffness = {stiffness} is not finite and >= 0")
         if damping_ratio is not None and damping is not None:
             raise ValueError("give damping_ratio or damping, not both")
+        if damping_ratio is not None:
+            damping_ratio = _real_number("damping_ratio", damping_ratio)
+            if not np.isfinite(damping_ratio) or damping_ratio < 0:
+                raise ValueError(f"damping_ratio = {damping_ratio} is not finite and >= 0")
 
         mesh, n = topology.mesh, topology.node_count
         springs, lengths = topology.springs, topology.rest_lengths
@@ -210,7 +286,7 @@ class SpringModel:
         masses[: mesh.node_count] = material.density * mesh.node_volumes()
         k = np.zeros(len(springs))
         if rule == "uniform":
-            k[:] = _effective_stiffness(np.full(len(springs), float(stiffness)), lengths, law)
+            k[:] = _effective_stiffness(np.full(len(springs), stiffness), lengths, law)
         else:
             edge_of_spring = _pair_index(springs, n, mesh.edges)
             if (edge_of_spring < 0).any():
@@ -230,8 +306,6 @@ class SpringModel:
         if (masses <= 0).any():
             raise ValueError(f"{(masses <= 0).sum()} node(s) got no mass (shell nodes in no shell triangle?)")
         if damping_ratio is not None:
-            if not np.isfinite(damping_ratio) or damping_ratio < 0:
-                raise ValueError(f"damping_ratio = {damping_ratio} is not finite and >= 0")
             m_i, m_j = masses[springs[:, 0]], masses[springs[:, 1]]
             damping = 2.0 * damping_ratio * np.sqrt(k * m_i * m_j / (m_i + m_j))
         return cls(topology.points, masses, springs, k, 0.0 if damping is None else damping, lengths,

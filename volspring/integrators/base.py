@@ -8,6 +8,7 @@ from abc import ABC, abstractmethod
 import numpy as np
 
 from volspring.errors import SimulationDiverged
+from volspring.material import _real_number
 from volspring.scene import Scene, State
 
 __all__ = ["Integrator"]
@@ -17,8 +18,8 @@ class Integrator(ABC):
     """One time step: ``integrator.step(scene, state, dt) -> State``.
 
     Subclasses implement :meth:`advance` (the raw scheme on all nodes); :meth:`step` adds what
-    every scheme needs: a check of ``dt``, the projection of constraints, obstacles and pins
-    after the step (:meth:`project`), and divergence detection (no NaN or Inf ever leaves a step).
+    every scheme needs: a check of its arguments, the projection of constraints, obstacles and
+    pins after the step (:meth:`project`), and divergence detection (no NaN or Inf ever leaves a step).
 
     Class attributes
     ----------------
@@ -38,8 +39,26 @@ class Integrator(ABC):
         """The scheme itself: the next state before projections. Must not modify ``state``."""
 
     def step(self, scene: Scene, state: State, dt: float) -> State:
-        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
-            raise ValueError(f"dt = {dt!r} s is not a finite number > 0")
+        """The state one step ``dt`` [s] after ``state``, projected; ``state`` is not modified.
+
+        Raises
+        ------
+        TypeError
+            ``scene`` is not a Scene, ``state`` not a State, ``dt`` not a real number.
+        ValueError
+            A ``dt`` that is not a finite number > 0; a state whose x or v is not (n, 3) for the
+            scene's model (:meth:`Scene.check_state` with ``finite=False``: the shapes only, as
+            every step's result is checked for NaN and Inf; check a state from outside once with
+            ``scene.check_state(state)``).
+        SimulationDiverged
+            The new state holds NaN or Inf.
+        """
+        step_size = _real_number("dt", dt)
+        if not (math.isfinite(step_size) and step_size > 0):
+            raise ValueError(f"dt = {step_size} s is not a finite number > 0")
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene must be a volspring Scene, got {type(scene).__name__}")
+        scene.check_state(state, finite=False)
         new = self.advance(scene, state, dt)
         self.project(scene, state, new, dt)
         check_finite(new, dt)
