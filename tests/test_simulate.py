@@ -235,3 +235,22 @@ def test_a_stiff_run_reports_no_inverted_tets():
         warnings.simplefilter("error", TetsInvertedWarning)
         result = simulate(scene, "implicit_euler", duration=0.1, dt=0.01)
     assert not result.inverted_tets.any() and result.worst_volume_ratio.min() > 0.9
+
+
+def test_the_start_state_is_checked_against_the_scene():
+    scene = pair_scene()
+    other = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [1.0] * 3, [[0, 1], [1, 2]],
+                                          stiffness=1.0))
+    with pytest.raises(ValueError, match=r"state.x has shape \(3, 3\), but the scene's model has 2 nodes"):
+        simulate(scene, "verlet", duration=0.1, dt=0.01, state=other.initial_state())
+    bad = scene.initial_state()
+    bad = bad.replace(v=np.array([[0.0, 0.0, 0.0], [np.nan, 0.0, 0.0]]))
+    with pytest.raises(ValueError, match=r"state.v\[1\] = \[nan, 0.0, 0.0\] m/s is not finite"):
+        simulate(scene, "implicit_euler", duration=0.1, dt=0.01, state=bad)
+
+
+def test_numpy_steps_are_numbers_and_bools_are_not():
+    result = simulate(pair_scene(), "verlet", duration=np.int64(1), dt=np.float32(0.5))
+    assert result.steps_taken == 2
+    with pytest.raises(TypeError, match="dt = True is not a real number"):
+        simulate(pair_scene(), "verlet", duration=1.0, dt=True)

@@ -58,6 +58,7 @@ import numpy as np
 from volspring.diagnostics import angular_momentum, linear_momentum, tet_inversion
 from volspring.errors import SimulationDiverged, TetsInvertedWarning
 from volspring.integrators import Integrator, make_integrator
+from volspring.material import _real_number
 from volspring.scene import Scene, State
 from volspring.springs import spring_energy
 from volspring.stability import GUARD_ACTIONS, StabilityGuard
@@ -253,10 +254,12 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
         integrator = make_integrator(integrator)
     if not isinstance(integrator, Integrator):
         raise TypeError(f"integrator must be an Integrator or a registered name, got {type(integrator).__name__}")
-    if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+    dt, duration = _real_number("dt", dt), _real_number("duration", duration)  # numpy scalars too; no bools
+    if not (math.isfinite(dt) and dt > 0):
         raise ValueError(f"dt = {dt!r} s is not a finite number > 0")
-    if not (isinstance(duration, (int, float, np.floating)) and math.isfinite(duration) and duration >= 0):
+    if not (math.isfinite(duration) and duration >= 0):
         raise ValueError(f"duration = {duration!r} s is not a finite number >= 0")
+    frame_dt = None if frame_dt is None else _real_number("frame_dt", frame_dt)
     if frame_dt is not None and not (math.isfinite(frame_dt) and frame_dt > 0):
         raise ValueError(f"frame_dt = {frame_dt!r} s is not a finite number > 0")
     if guard not in GUARD_ACTIONS:
@@ -268,8 +271,7 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
     if isinstance(runaway_checks, bool) or not isinstance(runaway_checks, (int, np.integer)) or runaway_checks < 1:
         raise ValueError(f"runaway_checks = {runaway_checks!r} is not a whole number >= 1")
     state = scene.initial_state() if state is None else state
-    if not isinstance(state, State):
-        raise TypeError(f"state must be a volspring State, got {type(state).__name__}")
+    scene.check_state(state)  # a State of this model, finite (each step checks its own result after)
 
     step_count = max(int(math.ceil(duration / dt - 1e-9)), 0)
     if guard != "off":
