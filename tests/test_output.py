@@ -267,3 +267,37 @@ def test_obj_write_failure_leaves_no_partial_file(tmp_path, model, anchored, mon
     monkeypatch.undo()
     assert leftovers(tmp_path) == [] and not (tmp_path / "frame_0001.obj").exists()
     assert len(read_pc2(writer.pc2_path)[0]) == 1
+
+
+# ---------------------------------------------------------------------- recording the files written
+@pytest.mark.parametrize("make", ["paraview", "blender"])
+def test_writers_announce_a_frames_files_before_writing_them(tmp_path, model, anchored, make):
+    announced = []
+
+    def record(*paths):
+        # Called before the frame's files exist under their final names (a crash then leaves no unlisted file).
+        announced.append([(path.name, path.exists()) for path in paths])
+
+    def writer(**options):
+        if make == "paraview":
+            return ParaViewWriter(tmp_path, model, record=record, **options)
+        return BlenderWriter(tmp_path, anchored, record=record, **options)
+
+    frames = states(model, 3)
+    first = writer()
+    for k, state in enumerate(frames[:2]):
+        first(k, state)
+    if make == "paraview":
+        assert announced == [
+            [("frame_0000.vtu", False), ("frame_springs_0000.vtu", False), ("frame.pvd", False),
+             ("frame_springs.pvd", False)],
+            [("frame_0001.vtu", False), ("frame_springs_0001.vtu", False), ("frame.pvd", True),
+             ("frame_springs.pvd", True)]]
+    else:
+        assert announced == [[("frame_0000.obj", False), ("frame.pc2", False)],
+                             [("frame_0001.obj", False), ("frame.pc2", True)]]
+    announced.clear()
+    again = writer(first_frame=1)  # resuming rewrites the collection files: announced first
+    assert [name for name, _ in announced[0]] == (["frame.pvd", "frame_springs.pvd"] if make == "paraview"
+                                                  else ["frame.pc2"])
+    assert again.frame_paths()[0].name == ("frame_0001.vtu" if make == "paraview" else "frame_0001.obj")

@@ -10,18 +10,31 @@ Your own mesh, clamped at its lowest z, under gravity::
 
     volspring-validate --mesh part.vtu --clamp zmin --E 2e6 --nu 0.4 --density 1100 --out part-report
 
-Writes ``OUT/report.html``, ``OUT/results.json`` and ``OUT/vtu/*.vtu``. Bad input ends with one line
-``volspring-validate: error: ...`` and exit status 2.
+Writes ``OUT/report.html``, ``OUT/results.json`` and ``OUT/vtu/*.vtu``, and lists them in
+``OUT/volspring-run.json`` (a :class:`volspring.output.RunFolder`). Running the same command again
+replaces that report (its listed files are removed first); a different command is refused on a
+folder holding another run's report, and on a non-empty folder that holds no ``volspring-run.json``,
+unless ``--overwrite`` is given (which removes only the files the old manifest lists, never anything
+else).
+
+Exit status: 0 success; 1 a failure while computing or writing; 2 bad input, found before any
+work (options, the mesh, the output and cache folders), with one line ``volspring-validate: error:
+...``; 130 on Ctrl-C and 143 on SIGTERM (129 on SIGHUP), with one line ``volspring-validate:
+interrupted by SIGTERM; ...``, no temporary file left and the run marked interrupted in its manifest.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 import time
+import warnings
 
 import numpy as np
+
+from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
 
 __all__ = ["main"]
 
@@ -52,6 +65,7 @@ class _Bar:
 
 def _parser():
     from validation.report import BUILT_IN, STUDIES
+    from volspring.units import add_unit_arguments
 
     parser = argparse.ArgumentParser(
         prog=PROG, description="Compare the spring model with linear-elastic FEM (scikit-fem, P2) on the same "
@@ -60,11 +74,17 @@ def _parser():
                         help=f"cases and studies to run: {', '.join(BUILT_IN + STUDIES)} (default: all, or only "
                              "your mesh with --mesh)")
     parser.add_argument("--quick", action="store_true", help="coarse meshes and short runs (about a minute)")
-    parser.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    parser.add_argument("--out", required=True, metavar="DIR",
+                        help="output folder; the same command run again replaces its report there")
+    parser.add_argument("--overwrite", action="store_true",
+                        help="replace the outputs of another run in --out (only the files its volspring-run.json "
+                             "lists are removed), or write into a non-empty folder without one (nothing removed)")
     parser.add_argument("--mesh", metavar="FILE", help="your tet mesh (any format meshio reads)")
+    add_unit_arguments(parser, applies_to="the coordinates of --mesh")
     parser.add_argument("--clamp", action="append", metavar="REGION",
                         help="region of --mesh held in place: xmin|xmax|ymin|ymax|zmin|zmax, x<VALUE, z>VALUE, "
-                             "box:x0,y0,z0,x1,y1,z1 (repeat to hold several)")
+                             "box:x0,y0,z0,x1,y1,z1, values in metres after --units and --scale (repeat to hold "
+                             "several)")
     parser.add_argument("--E", type=float, default=1e6, help="Young's modulus of --mesh [Pa] (default 1e6)")
     parser.add_argument("--nu", type=float, default=0.3, help="Poisson ratio of --mesh, < 0.5 (default 0.3)")
     parser.add_argument("--density", type=float, default=1000.0, help="density of --mesh [kg/m^3] (default 1000)")
@@ -96,7 +116,10 @@ def _own_case(args):
     if gravity.shape != (3,) or not np.isfinite(gravity).all():
         raise _BadInput(f"--gravity {args.gravity!r} is not three finite numbers GX,GY,GZ")
     try:
-        mesh = TetMesh.read(args.mesh)
+        with warnings.catch_warnings():
+            # A body read too large is also logged by volspring.units: shown once, by the log handler.
+            warnings.simplefilter("ignore", UserWarning)
+            mesh = TetMesh.read(args.mesh, units=args.units, scale=args.scale)
     except (OSError, ValueError) as error:
         raise _BadInput(str(error)) from None
     regions = [parse_region(text, mesh) for text in args.clamp]
@@ -127,37 +150,98 @@ def _check(args):
         raise _BadInput(f"--density {args.density:g} kg/m^3 is not > 0")
     if args.clamp and not args.mesh:
         raise _BadInput("--clamp applies to --mesh FILE, which is missing")
+    if not args.mesh and (args.units != "m" or args.scale is not None):
+        raise _BadInput("--units and --scale apply to --mesh FILE, which is missing")
+    if args.scale is not None and not (np.isfinite(args.scale) and args.scale > 0):
+        raise _BadInput(f"--scale {args.scale:g} is not a finite number > 0")
+    _check_folders(args)
+
+
+def _check_folders(args) -> None:
+    """The output and cache folders exist as writable folders or can be created: checked before any work."""
+    from validation.cache import default_folder
+    from volspring.output import check_output_folder
+
+    try:
+        check_output_folder(args.out, label="--out")
+        if args.cache is not None:
+            check_output_folder(args.cache, label="--cache")
+    except OSError as error:
+        raise _BadInput(str(error)) from None
+    if args.cache is None:
+        try:
+            check_output_folder(default_folder(), label="the FEM cache folder")
+        except OSError as error:
+            raise _BadInput(f"{error}; choose another with --cache DIR or $VOLSPRING_CACHE") from None
+
+
+def _error(error, status: int) -> int:
+    message = " ".join(str(error).split())  # one line, whatever the message holds
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    return status
 
 
 def main(argv=None) -> int:
-    """Run ``volspring-validate``; returns the exit status (0 ok, 2 bad input, 1 failure)."""
+    """Run ``volspring-validate``; returns the exit status (module docstring)."""
     parser = _parser()
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
                         format="%(levelname)s %(name)s: %(message)s")
-    try:
-        _check(args)
-        own = _own_case(args) if args.mesh else None
-    except ValueError as error:  # _BadInput, and the checks of parse_region, Material, own_mesh_case
-        print(f"{PROG}: error: {error}", file=sys.stderr)
-        return 2
-    from validation.report import validate
-
+    command = [PROG] + [str(word) for word in (sys.argv[1:] if argv is None else argv)]
     bar = _Bar(sys.stderr, enabled=not args.no_progress)
-    command = [PROG] + list(sys.argv[1:] if argv is None else argv)
-    start = time.perf_counter()
-    try:
-        validate(args.out, cases=args.cases, quick=args.quick, own_case=own, folder=args.cache, progress=bar,
-                 command=command)
-    except (ValueError, ArithmeticError, RuntimeError, OSError) as error:
-        bar.close()
-        message = " ".join(str(error).split())
-        print(f"{PROG}: error: {message}", file=sys.stderr)
-        return 2 if isinstance(error, ValueError) else 1
+    run = None
+    with handle_termination():
+        try:
+            from validation.cache import default_folder
+            from validation.report import validate
+            from volspring._io import remove_stale_temporaries
+            from volspring.output import RunFolder
+
+            try:
+                _check(args)
+                own = _own_case(args) if args.mesh else None
+                # The folder is claimed before the work: a refusal comes now, not after minutes of computing.
+                run = RunFolder.open(args.out, command=command, overwrite=args.overwrite, replace_same_command=True,
+                                     flags={"overwrite": "--overwrite"})
+            except ValueError as error:  # _BadInput, RunFolderRefused, parse_region, Material, ...
+                return _error(error, 2)
+            except OSError as error:  # the folder was fine but could not be set up (a file that would not go)
+                return _error(error, 1)
+            with contextlib.suppress(OSError):  # leftovers of killed runs; a cache that cannot be cleaned still works
+                remove_stale_temporaries(args.cache or default_folder())
+            start = time.perf_counter()
+            with run:
+                try:
+                    validate(args.out, cases=args.cases, quick=args.quick, own_case=own, folder=args.cache,
+                             progress=bar, command=command, record=run.record)
+                except (ValueError, ArithmeticError, RuntimeError, OSError) as error:
+                    run.finish("failed")
+                    bar.close()
+                    return _error(error, 2 if isinstance(error, ValueError) else 1)
+        except (KeyboardInterrupt, Interrupted) as stop:
+            bar.close()
+            if run is not None:
+                with contextlib.suppress(OSError):
+                    run.finish("interrupted")
+            print(f"{PROG}: interrupted by {interruption_name(stop)}; {_left_behind(run)}", file=sys.stderr)
+            return exit_status(stop)
     bar.close()
-    print(f"wrote {args.out}/report.html, {args.out}/results.json and {args.out}/vtu/ "
-          f"in {time.perf_counter() - start:.0f} s")
+    replaced = f" (replacing the {len(run.removed)} file(s) of the previous run)" if run.removed else ""
+    written = [f"{args.out}/report.html", f"{args.out}/results.json"]
+    written += [f"{args.out}/vtu/"] if any(file.startswith("vtu/") for file in run.files) else []
+    print(f"wrote {', '.join(written[:-1])} and {written[-1]} in {time.perf_counter() - start:.0f} s{replaced}")
     return 0
+
+
+def _left_behind(run) -> str:
+    """What an interrupted run leaves, for its one-line message."""
+    if run is None:
+        return "nothing was written"
+    written = [file for file in run.files if (run.path / file).is_file()]
+    if not written:
+        return f"nothing was written to {run.path} ({run.manifest_path} marks the run interrupted)"
+    return (f"{run.path} holds {len(written)} complete file(s) of the report, listed in {run.manifest_path} "
+            "(marked interrupted); run the command again to redo it")
 
 
 if __name__ == "__main__":  # pragma: no cover

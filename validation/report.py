@@ -221,23 +221,42 @@ def _headline(results, rules) -> dict:
 
 # ---------------------------------------------------------------------------- outputs
 def validate(out, *, cases=None, quick: bool = False, own_case=None, rules=RULES, folder=None, progress=None,
-             command=None) -> dict:
-    """:func:`run_validation` then :func:`write_outputs` into ``out``; returns the results."""
+             command=None, record=None) -> dict:
+    """:func:`run_validation` then :func:`write_outputs` into ``out``; returns the results.
+
+    ``record`` is passed on to :func:`write_outputs`.
+    """
     results, artefacts = run_validation(cases=cases, quick=quick, own_case=own_case, rules=rules, folder=folder,
                                         progress=progress)
     results["command"] = command
-    write_outputs(out, results, artefacts)
+    write_outputs(out, results, artefacts, record=record)
     return results
 
 
-def write_outputs(out, results: dict, artefacts: dict) -> dict:
+def write_outputs(out, results: dict, artefacts: dict, *, record=None) -> dict:
     """Write ``out/vtu/*.vtu``, ``out/results.json`` and ``out/report.html`` (in that order, each atomic).
+
+    Parameters
+    ----------
+    out : path-like
+        The report folder, created if missing.
+    results : dict
+        The results of :func:`run_validation`.
+    artefacts : dict
+        The comparisons of :func:`run_validation`, for the VTU files.
+    record : callable, optional
+        Called once as ``record(*paths)`` with every file about to be written, before any is
+        written (a :meth:`volspring.output.RunFolder.record`, so the run manifest lists them).
 
     Returns
     -------
-    dict -- name -> Path of every file written
+    dict
+        name -> Path of every file written.
     """
     out = Path(out)
+    if record is not None:
+        record(*[out / "vtu" / file for name in artefacts for file in _vtu_names(name)],
+               out / "results.json", out / "report.html")
     out.mkdir(parents=True, exist_ok=True)
     written = {}
     files = {}
@@ -272,6 +291,11 @@ def _clean(value):
     return value
 
 
+def _vtu_names(name: str) -> tuple:
+    """The VTU files of a case: every model on the rest mesh, and the models side by side."""
+    return f"{name}.vtu", f"{name}_side_by_side.vtu"
+
+
 def _write_vtu(folder: Path, name: str, comparison) -> tuple:
     """One file with every model's displacement as point data on the rest mesh, and one with the
     models side by side (copies offset across the shortest extent, each with its own displacement)."""
@@ -283,7 +307,8 @@ def _write_vtu(folder: Path, name: str, comparison) -> tuple:
     for model, u in fields.items():
         if model != models[0]:
             point_data[f"error_{model}"] = np.linalg.norm(np.asarray(u) - reference, axis=1)
-    paths = {f"{name}.vtu": mesh.write(folder / f"{name}.vtu", point_data=point_data)}
+    together, side_by_side = _vtu_names(name)
+    paths = {together: mesh.write(folder / together, point_data=point_data)}
     extent = np.ptp(mesh.points, axis=0)
     axis = int(np.argmin(extent))
     offset = np.zeros(3)
@@ -293,8 +318,8 @@ def _write_vtu(folder: Path, name: str, comparison) -> tuple:
     side = TetMesh(points, tets)
     displacement = np.concatenate([np.asarray(fields[model], float) for model in models])
     model_index = np.repeat(np.arange(len(models)), mesh.tet_count)
-    paths[f"{name}_side_by_side.vtu"] = side.write(
-        folder / f"{name}_side_by_side.vtu", point_data={"displacement": displacement},
+    paths[side_by_side] = side.write(
+        folder / side_by_side, point_data={"displacement": displacement},
         cell_data={"model": model_index})
     return paths, models
 

@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import signal
+import sys
 import threading
 
 __all__ = ["Interrupted", "Terminated", "exit_status", "handle_termination", "interruption_name"]
@@ -37,6 +39,10 @@ logger = logging.getLogger(__name__)
 
 #: The signals turned into :class:`Terminated` (those this platform has).
 TERMINATION_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+#: Seconds after which a signal dropped by a finalizer is sent again: long enough for the finalizer
+#: and the hook that saw it to return, short next to any run a user would stop.
+RESEND_DELAY = 0.01
 
 
 class Interrupted(BaseException):
@@ -122,8 +128,16 @@ def handle_termination(signals=TERMINATION_SIGNALS):
 
     Notes
     -----
-    - The first signal raises; further ones arriving while the exception unwinds are ignored, so
-      that a second ``kill`` does not cut the clean-up short (SIGKILL still ends the process).
+    - Python runs a signal handler in whatever Python code the main thread is executing, a
+      finalizer included (a ``__del__``, a generator closed by the garbage collector), where an
+      exception is printed as "Exception ignored" and dropped. The run would then go on as if the
+      signal had not come. Inside the block such a :class:`Terminated` is not printed but sent
+      again, from a helper thread so that it arrives once the finalizer is over, and is raised in
+      the code the finalizer interrupted.
+    - Every signal raises, including one arriving while an earlier one unwinds: a ``kill`` is
+      never lost, at the cost of a second ``kill`` in quick succession possibly cutting a
+      clean-up short (the temporary file it leaves is removed by the next run's
+      :func:`volspring._io.remove_stale_temporaries`).
     - A signal whose disposition is "ignore" when the block starts (``nohup`` ignores SIGHUP) stays
       ignored.
     - The handlers in place before the block are restored when it ends, however it ends.
@@ -134,17 +148,26 @@ def handle_termination(signals=TERMINATION_SIGNALS):
         logger.debug("handle_termination outside the main thread: signals are left as they are")
         yield
         return
-    raised = []
 
     def handler(signum, frame):
-        if raised:  # already unwinding: let the clean-up finish
-            logger.debug("ignoring %s: already stopping", signal.Signals(signum).name)
-            return
-        raised.append(signum)
         raise Terminated(signum)
+
+    previous_hook = sys.unraisablehook
+
+    def unraisable(info):
+        if isinstance(info.exc_value, Terminated):  # raised inside a finalizer, which drops it: send it again
+            logger.debug("%s arrived in %r, which ignores exceptions; sending it again", info.exc_value.signal_name,
+                         info.object)
+            # Not from here, nor at once: the signal would be handled inside this hook, which drops it too.
+            resend = threading.Timer(RESEND_DELAY, os.kill, args=(os.getpid(), info.exc_value.signum))
+            resend.daemon = True
+            resend.start()
+            return
+        previous_hook(info)
 
     previous = {}
     try:
+        sys.unraisablehook = unraisable
         for signum in signals:
             before = signal.getsignal(signum)
             if before == signal.SIG_IGN:
@@ -156,3 +179,5 @@ def handle_termination(signals=TERMINATION_SIGNALS):
         for signum, before in previous.items():
             # getsignal returns None for a handler not installed from Python: restore the default then.
             signal.signal(signum, signal.SIG_DFL if before is None else before)
+        if sys.unraisablehook is unraisable:
+            sys.unraisablehook = previous_hook

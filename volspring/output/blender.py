@@ -24,6 +24,10 @@ none, at the cost of one in-place header update per frame.
 In Blender: import ``NAME_0000.obj`` with Forward = Y, Up = Z (coordinates as they are, z up)
 and the vertex order kept, then add a Mesh Cache modifier reading ``NAME.pc2`` (its default
 axes, Forward Y and Up Z, match).
+
+With ``record=`` (a :meth:`volspring.output.RunFolder.record`), the writer announces the files of
+each frame, in one call, before writing them: the run folder's manifest lists every file the run
+wrote, even after a crash.
 """
 
 from __future__ import annotations
@@ -134,6 +138,8 @@ class BlenderWriter:
     sample_rate : float -- PC2 frames per sample, default 1
     first_frame : int -- resume an earlier run: keep its first ``first_frame`` samples and OBJ
         files, and write the next frame as number ``first_frame``; 0 (default) starts afresh
+    record : callable, optional -- called as ``record(*paths)`` with the files of each frame (OBJ
+        and PC2) before they are written, such as :meth:`RunFolder.record`; default None
 
     Examples
     --------
@@ -148,7 +154,7 @@ class BlenderWriter:
     """
 
     def __init__(self, directory, surface, *, name="frame", obj=True, pc2=True, start_frame=0.0,
-                 sample_rate=1.0, first_frame=0):
+                 sample_rate=1.0, first_frame=0, record=None):
         if not hasattr(surface, "deform"):
             surface = BoundarySurface.from_mesh(surface)
         self.surface = surface
@@ -175,7 +181,9 @@ class BlenderWriter:
         if self.frame_count < 0:
             raise ValueError(f"first_frame = {first_frame} is not >= 0")
         self._point_count = None
+        self._record = record
         if self.pc2 and self.frame_count:
+            self._announce(self.pc2_path)
             self._resume_pc2()
 
     @property
@@ -184,6 +192,19 @@ class BlenderWriter:
 
     def obj_path(self, frame: int) -> Path:
         return self.directory / f"{self.name}_{frame:04d}.obj"
+
+    def frame_paths(self) -> list:
+        """The files the next frame writes or extends: its OBJ file and the PC2 cache.
+
+        Returns
+        -------
+        list of Path
+        """
+        return ([self.obj_path(self.frame_count)] if self.obj else []) + ([self.pc2_path] if self.pc2 else [])
+
+    def _announce(self, *paths) -> None:
+        if self._record is not None:
+            self._record(*paths)
 
     def __call__(self, frame_index, state):
         """``simulate`` callback: write ``state`` as the next frame (``frame_index`` is not used)."""
@@ -215,6 +236,7 @@ class BlenderWriter:
         if points.ndim != 2 or points.shape[1] != 3 or not np.isfinite(points).all():
             raise ValueError(f"frame {self.frame_count}: the deformed surface must be finite of shape (p, 3), "
                              f"got shape {points.shape}")
+        self._announce(*self.frame_paths())
         if self.obj:
             with atomic_path(self.obj_path(self.frame_count)) as tmp:
                 # %.9g round-trips float32, the precision Blender keeps.

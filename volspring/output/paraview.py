@@ -18,6 +18,10 @@ its own arrays; the time slider follows the PVD times in seconds.
 Every file is written atomically (temporary file, then rename), and the PVD is rewritten after
 the frame's VTU files are in place, so a run that dies at any point leaves PVD files that list
 complete frames only. A state holding NaN or Inf is refused: nothing is written for it.
+
+With ``record=`` (a :meth:`volspring.output.RunFolder.record`), the writer announces the files of
+each frame, in one call, before writing any of them: the run folder's manifest lists every file
+the run wrote, even after a crash.
 """
 
 from __future__ import annotations
@@ -101,6 +105,8 @@ class ParaViewWriter:
     first_frame : int -- resume an earlier series: keep its first ``first_frame`` frames (files
         and PVD entries) and write the next frame as number ``first_frame``; 0 (default) starts
         afresh. Raises if the existing PVD lists fewer frames.
+    record : callable, optional -- called as ``record(*paths)`` with the files of each frame (and
+        the PVD files) before any of them is written, such as :meth:`RunFolder.record`; default None
 
     Notes
     -----
@@ -121,7 +127,7 @@ class ParaViewWriter:
     (1, 'frame.pvd')
     """
 
-    def __init__(self, directory, model, *, name="frame", springs=True, first_frame=0):
+    def __init__(self, directory, model, *, name="frame", springs=True, first_frame=0, record=None):
         self.directory = Path(directory)
         self.model = model
         self.name = str(name)
@@ -133,6 +139,7 @@ class ParaViewWriter:
             raise ValueError("the model has no tet mesh (built from arrays) and springs=False: nothing to write")
         if self.mesh is not None:
             self._rest_volumes = self.mesh.tet_volumes
+        self._record = record
         self.directory.mkdir(parents=True, exist_ok=True)
         self._entries = {"body": [], "springs": []}
         first_frame = int(first_frame)
@@ -145,6 +152,7 @@ class ParaViewWriter:
                     raise ValueError(f"cannot resume at frame {first_frame}: {self._pvd(series)} lists "
                                      f"{len(kept)} frame(s)")
                 self._entries[series] = [(time, file.name) for time, file in kept]
+            self._announce(*(self._pvd(series) for series in self._series()))
             for series in self._series():  # drop frames of the earlier run past the resume point
                 write_pvd(self._pvd(series), self._entries[series])
         self.frame_count = first_frame
@@ -169,6 +177,23 @@ class ParaViewWriter:
 
     def _pvd(self, series) -> Path:
         return self.directory / f"{self._stem(series)}.pvd"
+
+    def _vtu(self, series, frame) -> Path:
+        return self.directory / f"{self._stem(series)}_{frame:04d}.vtu"
+
+    def frame_paths(self) -> list:
+        """The files the next frame writes or rewrites: its VTU files and the PVD collections.
+
+        Returns
+        -------
+        list of Path
+        """
+        return ([self._vtu(series, self.frame_count) for series in self._series()]
+                + [self._pvd(series) for series in self._series()])
+
+    def _announce(self, *paths) -> None:
+        if self._record is not None:
+            self._record(*paths)
 
     # ------------------------------------------------------------------ writing
     def __call__(self, frame_index, state):
@@ -197,6 +222,7 @@ class ParaViewWriter:
             raise ValueError(f"frame {self.frame_count} has t = {t!r} s, not after the previous frame's "
                              f"t = {self.times[-1]!r} s")
         displacement = x - self.model.rest_positions
+        self._announce(*self.frame_paths())
         files = {}
         try:
             self._write_frame(x, v, displacement, files)
@@ -232,7 +258,7 @@ class ParaViewWriter:
     def _write_vtu(self, series, points, cells, *, point_data, cell_data) -> Path:
         import meshio
 
-        path = self.directory / f"{self._stem(series)}_{self.frame_count:04d}.vtu"
+        path = self._vtu(series, self.frame_count)
         with atomic_path(path) as tmp:
             meshio.write(tmp, meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data),
                          file_format="vtu")
