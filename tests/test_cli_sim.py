@@ -274,6 +274,8 @@ def test_an_interrupted_run_says_where_it_stopped_in_one_line(tmp_path, signal_n
     assert lines[0].endswith(f"--resume {out / 'checkpoint.npz'}")
     assert not [p.name for p in out.iterdir() if p.name.startswith(".")]  # no temporary file left
     assert load_checkpoint(out / "checkpoint.npz").step > 0
+    import json
+    assert json.loads((out / "volspring-run.json").read_text())["status"] == "interrupted"
 
 
 def test_units_convert_the_input_and_the_lengths_given_with_it(tmp_path, capsys, beam_file):
@@ -308,3 +310,39 @@ def test_a_shape_in_millimetres(tmp_path, capsys):
                            *FAST, "--duration", "0.01", "--no-progress")
     assert status == 0, err
     assert "box:0.2,0.05,0.05 meshed" in out and "mass 0.55 kg" in out  # 5e-4 m^3 of 1100 kg/m^3 rubber
+
+
+def test_a_new_run_into_an_earlier_runs_folder_needs_overwrite_and_removes_only_its_files(tmp_path, capsys,
+                                                                                          beam_file):
+    import json
+
+    out = tmp_path / "out"
+    common = [beam_file, *PIN_END, *FAST, "--quiet", "--out", out, "--blender"]
+    assert run(capsys, *common, "--duration", "0.1")[0] == 0  # 11 frames
+    manifest = json.loads((out / "volspring-run.json").read_text())
+    assert manifest["status"] == "finished" and "frame_0010.vtu" in manifest["files"]
+    (out / "my_notes.txt").write_text("mine")  # a user's file beside the outputs
+    # A shorter run into the same folder: refused without --overwrite, naming the folder and the flag.
+    status, _, err = run(capsys, *common, "--duration", "0.03")
+    assert status == 1 and len(err.splitlines()) == 1 and str(out) in err and "--overwrite" in err
+    assert (out / "frame_0010.vtu").exists()  # nothing touched
+    status, _, err = run(capsys, *common, "--duration", "0.03", "--overwrite")
+    assert status == 0, err
+    # Only the shorter run's frames remain (before, 156 stale files stayed for ParaView and Blender to find).
+    assert sorted(p.name for p in out.glob("frame_0*.vtu")) == [f"frame_{k:04d}.vtu" for k in range(4)]
+    assert sorted(p.name for p in out.glob("surface_*.obj")) == [f"surface_{k:04d}.obj" for k in range(4)]
+    assert len(read_pvd(out / "frame.pvd")) == 4 and len(read_pc2(out / "surface.pc2")[0]) == 4
+    assert (out / "my_notes.txt").read_text() == "mine"  # never anything volspring did not write
+    listed = set(json.loads((out / "volspring-run.json").read_text())["files"])
+    assert listed == {p.name for p in out.iterdir()} - {"my_notes.txt", "volspring-run.json"}
+
+
+def test_stale_temporaries_of_a_killed_run_are_removed_by_the_next(tmp_path, capsys, beam_file):
+    out = tmp_path / "out"
+    out.mkdir()
+    # What a SIGKILL mid-write leaves: a temporary named by a process that no longer runs.
+    stale = out / ".frame_0076.volspring-tmp-999999999-3fa9c2e1.vtu"
+    stale.write_bytes(b"\0" * 1000)
+    status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--out", out, "--quiet")
+    assert status == 0, err
+    assert not stale.exists()

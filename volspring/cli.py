@@ -69,6 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     from volspring.integrators import INTEGRATORS
     from volspring.model import STIFFNESS_RULES
     from volspring.simulate import RUNAWAY_CHECKS, RUNAWAY_FACTOR
+    from volspring.output.run_folder import MANIFEST_NAME as MANIFEST
     from volspring.units import add_unit_arguments
 
     parser = _Parser(prog=PROG, description="Simulate a volumetric soft body as a tetrahedral mass-spring model.",
@@ -127,6 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
                              "model, integrator and --dt of its run, and a resume with another INPUT, material, "
                              "pins, integrator or --dt is refused, naming what differs (a resumed run is "
                              "bit-identical to one that never stopped)")
+    output.add_argument("--overwrite", action="store_true",
+                        help="replace the outputs of an earlier run in DIR: only the files its manifest "
+                             f"({MANIFEST}) lists are removed, never anything volspring did not write (without "
+                             "it, a DIR holding another run's outputs, or files of unknown origin, is refused)")
     output.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                         help="progress bar on stderr (default: when stderr is a terminal)")
     output.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary")
@@ -149,7 +154,7 @@ def main(argv=None) -> int:
     try:
         with warnings.catch_warnings(), handle_termination():
             warnings.showwarning = _show_warning  # one line each, on stderr, from the first check on
-            return _run(args, progress)
+            return _run(args, progress, sys.argv[1:] if argv is None else [str(token) for token in argv])
     except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
         return _fail(error, EXIT_DIVERGED)
     except (_InputError, ValueError, OSError, SolverNotConverged, Warning) as error:
@@ -203,13 +208,27 @@ def _fail(message, status) -> int:
 
 
 # ---------------------------------------------------------------------- steps of a run
-def _run(args, status: _RunProgress) -> int:
+def _run(args, status: _RunProgress, argv) -> int:
+    """Check, open the output folder, then build, run and report; the folder's manifest ends with the
+    run's status (finished, failed, interrupted)."""
+    _check_numbers(args)
+    _check_output(args)
+    if args.out is None:
+        return _run_in(args, status, None)
+    from volspring.output import RunFolder
+
+    # Claimed before any work: a refused folder costs nothing, and every file is listed before it exists.
+    run = RunFolder.open(args.out, command=[PROG, *argv], overwrite=args.overwrite, resume=args.resume is not None,
+                         flags={"overwrite": "--overwrite", "resume": "--resume CHECKPOINT"})
+    with run:
+        return _run_in(args, status, run)
+
+
+def _run_in(args, status: _RunProgress, run) -> int:
     from volspring.checkpoint import load_checkpoint, save_checkpoint
     from volspring.integrators import make_integrator
     from volspring.simulate import simulate
 
-    _check_numbers(args)
-    _check_output(args)
     started = time.perf_counter()
     mesh, origin = _load_mesh(args)
     model = _build_model(args, mesh)
@@ -230,15 +249,18 @@ def _run(args, status: _RunProgress) -> int:
     # uninterrupted one (no round-off from t).
     remaining = total_steps - state.step
 
-    writers = _writers(args, model, first_frame)
+    writers = _writers(args, model, first_frame, None if run is None else run.record)
     checks = {} if args.runaway_factor is None else {"runaway_factor": args.runaway_factor}
     progress = _Progress(enabled=_progress_enabled(args), start=state.t, end=state.t + remaining * args.dt)
     last = {"frames": 0, "state": state}
 
     def on_frame(frame_index, current):
+        if run is not None:  # the frame's files listed in one manifest write, before any is written
+            run.record(*(path for writer in writers for path in writer.frame_paths()))
         for writer in writers:
             writer(frame_index, current)
         if args.checkpoint_every and frame_index and frame_index % args.checkpoint_every == 0:
+            run.record(args.out / CHECKPOINT_NAME)
             save_checkpoint(args.out / CHECKPOINT_NAME, current, scene=scene, integrator=integrator, dt=args.dt)
             status.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
         last["frames"] += 1
@@ -258,6 +280,7 @@ def _run(args, status: _RunProgress) -> int:
     finally:
         progress.close()
     if args.checkpoint_every:
+        run.record(args.out / CHECKPOINT_NAME)
         save_checkpoint(args.out / CHECKPOINT_NAME, result.state, scene=scene, integrator=integrator, dt=args.dt)
     if not args.quiet:
         _summary(args, origin, mesh, model, scene, integrator, result, first_frame, time.perf_counter() - started)
@@ -428,18 +451,18 @@ def _frames_before(args, t) -> int:
     return sum(1 for time, _ in read_pvd(pvd) if time < t - 1e-6 * args.dt)
 
 
-def _writers(args, model, first_frame):
+def _writers(args, model, first_frame, record):
     from volspring.output import BlenderWriter, ParaViewWriter
 
     if args.out is None:
         return []
-    writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame)]
+    writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame, record=record)]
     if args.blender:
         surface = (model if args.render_surface is None
                    else _anchored_surface(args.render_surface, model, args.units, args.scale))
         pc2 = args.out / f"{SURFACE_NAME}.pc2"
         writers.append(BlenderWriter(args.out, surface, name=SURFACE_NAME,
-                                     first_frame=first_frame if pc2.is_file() else 0))
+                                     first_frame=first_frame if pc2.is_file() else 0, record=record))
     return writers
 
 
