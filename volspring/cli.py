@@ -150,18 +150,18 @@ def main(argv=None) -> int:
         return done.code if isinstance(done.code, int) else 0
     from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
 
-    progress = _RunProgress()
+    where = _RunProgress()
     try:
         with warnings.catch_warnings(), handle_termination():
             warnings.showwarning = _show_warning  # one line each, on stderr, from the first check on
-            return _run(args, progress, sys.argv[1:] if argv is None else [str(token) for token in argv])
+            return _run(args, where, sys.argv[1:] if argv is None else [str(token) for token in argv])
     except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
         return _fail(error, EXIT_DIVERGED)
     except (_InputError, ValueError, OSError, SolverNotConverged, Warning) as error:
         return _fail(error, EXIT_INPUT)
     except (KeyboardInterrupt, Interrupted) as stop:  # Ctrl-C, SIGTERM, SIGHUP: one line, no traceback
         argv = sys.argv[1:] if argv is None else [str(token) for token in argv]
-        print(f"{PROG}: interrupted by {interruption_name(stop)}{progress.describe(argv)}", file=sys.stderr)
+        print(f"{PROG}: interrupted by {interruption_name(stop)}{where.describe(argv)}", file=sys.stderr)
         return exit_status(stop)
 
 
@@ -208,23 +208,23 @@ def _fail(message, status) -> int:
 
 
 # ---------------------------------------------------------------------- steps of a run
-def _run(args, status: _RunProgress, argv) -> int:
+def _run(args, where: _RunProgress, argv) -> int:
     """Check, open the output folder, then build, run and report; the folder's manifest ends with the
     run's status (finished, failed, interrupted)."""
     _check_numbers(args)
     _check_output(args)
     if args.out is None:
-        return _run_in(args, status, None)
+        return _run_in(args, where, None)
     from volspring.output import RunFolder
 
     # Claimed before any work: a refused folder costs nothing, and every file is listed before it exists.
     run = RunFolder.open(args.out, command=[PROG, *argv], overwrite=args.overwrite, resume=args.resume is not None,
                          flags={"overwrite": "--overwrite", "resume": "--resume CHECKPOINT"})
     with run:
-        return _run_in(args, status, run)
+        return _run_in(args, where, run)
 
 
-def _run_in(args, status: _RunProgress, run) -> int:
+def _run_in(args, where: _RunProgress, run) -> int:
     from volspring.checkpoint import load_checkpoint, save_checkpoint
     from volspring.integrators import make_integrator
     from volspring.simulate import simulate
@@ -240,7 +240,7 @@ def _run_in(args, status: _RunProgress, run) -> int:
     total_steps = max(int(math.ceil(args.duration / args.dt - 1e-9)), 0)
     if args.resume is not None:
         state = load_checkpoint(args.resume, scene=scene, integrator=integrator, dt=args.dt)
-        status.checkpoint = (args.resume, state.t)
+        where.checkpoint = (args.resume, state.t)
         if state.step >= total_steps:
             raise _InputError(f"the checkpoint {args.resume} is at step {state.step} (t = {state.t:.6g} s), "
                               f"already at --duration {args.duration:g} s ({total_steps} steps)")
@@ -262,9 +262,9 @@ def _run_in(args, status: _RunProgress, run) -> int:
         if args.checkpoint_every and frame_index and frame_index % args.checkpoint_every == 0:
             run.record(args.out / CHECKPOINT_NAME)
             save_checkpoint(args.out / CHECKPOINT_NAME, current, scene=scene, integrator=integrator, dt=args.dt)
-            status.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
+            where.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
         last["frames"] += 1
-        last["state"] = status.state = current
+        last["state"] = where.state = current
         progress.update(current.t, first_frame + frame_index)
 
     try:
