@@ -240,9 +240,9 @@ def test_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, beam_fi
     target.write_text("not a folder")
     monkeypatch.setattr(volspring.cli, "_load_mesh", lambda args: pytest.fail("meshed before checking --out"))
     status, _, err = run(capsys, beam_file, "--out", target)
-    assert status == 1 and f"--out {target} is an existing file; expected a folder" in err
+    assert status == 1 and f"--out {target} is an existing file, expected a folder" in err
     status, _, err = run(capsys, beam_file, "--out", target / "below")
-    assert status == 1 and f"{target} is a file, so the folder cannot be made" in err
+    assert status == 1 and f"{target} is a file, not a folder" in err
 
 
 @pytest.mark.parametrize("signal_name, status", [("SIGTERM", 143), ("SIGINT", 130)])

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import shlex
 import sys
 import time
@@ -212,10 +211,11 @@ def _run(args, where: _RunProgress, argv) -> int:
     """Check, open the output folder, then build, run and report; the folder's manifest ends with the
     run's status (finished, failed, interrupted)."""
     _check_numbers(args)
-    _check_output(args)
     if args.out is None:
         return _run_in(args, where, None)
-    from volspring.output import RunFolder
+    from volspring.output import RunFolder, check_output_folder
+
+    check_output_folder(args.out, label="--out")  # a file, below a file, not writable: before any work
 
     # Claimed before any work: a refused folder costs nothing, and every file is listed before it exists.
     run = RunFolder.open(args.out, command=[PROG, *argv], overwrite=args.overwrite, resume=args.resume is not None,
@@ -315,20 +315,6 @@ def _check_numbers(args) -> None:
         raise _InputError(f"--newton-iterations applies to --integrator implicit_euler, not {args.integrator}")
     if args.runaway_factor is not None and not args.runaway_factor > 0:
         raise _InputError(f"--runaway-factor = {args.runaway_factor:g} is not > 0 ('inf' turns the check off)")
-
-
-def _check_output(args) -> None:
-    """Refuse an output location that cannot be a folder before any work is done."""
-    if args.out is None:
-        return
-    out = args.out
-    if out.exists() and not out.is_dir():
-        raise _InputError(f"--out {out} is an existing file; expected a folder (new or one of an earlier run)")
-    parent = next((folder for folder in (out, *out.parents) if folder.exists()), None)
-    if parent is not None and not parent.is_dir():
-        raise _InputError(f"--out {out}: {parent} is a file, so the folder cannot be made")
-    if parent is not None and not os.access(parent, os.W_OK | os.X_OK):
-        raise _InputError(f"--out {out}: cannot write in {parent} (permission denied)")
 
 
 def _load_mesh(args):
