@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from volspring.mesh import TET_EDGES, TET_FACES, TetMesh, signed_tet_volumes
+from volspring.mesh import TET_EDGES, TET_FACES, ZERO_VOLUME, TetMesh, signed_tet_volumes
 
 __all__ = [
     "POOR_DIHEDRAL_DEGREES",
@@ -46,9 +46,9 @@ def _arrays(mesh_or_points, tets=None):
 
 def _checked_volumes(points, tets):
     volumes = signed_tet_volumes(points, tets)
-    # Same rule as TetMesh: |V| below 1e-12 l^3 is the round-off of a flat tet.
+    # The TetMesh rule (volspring.mesh.ZERO_VOLUME): |V| below 1e-12 l^3 is the round-off of a flat tet.
     scale = np.ptp(points[tets], axis=1).max(axis=1) ** 3
-    bad = volumes <= 1e-12 * scale
+    bad = volumes <= ZERO_VOLUME * scale
     if bad.any():
         first = np.flatnonzero(bad)[0]
         raise ValueError(

@@ -11,7 +11,7 @@ import os
 
 import numpy as np
 
-from volspring.mesh import TET_FACES, TetMesh, signed_tet_volumes
+from volspring.mesh import TET_FACES, ZERO_VOLUME, TetMesh, signed_tet_volumes
 
 __all__ = ["MAX_TETS", "METHODS", "TETS_PER_CUBIC_SIZE", "estimated_tet_count", "tetrahedralize"]
 
@@ -234,7 +234,7 @@ def _delaunay_tets(surface, size, seed, movable_surface):
     # Tets made of band points only are the slivers of the convex hull's skin, not part of the band layer.
     in_band &= ~(tets >= surface_count + len(lattice)).all(axis=1)
     volumes, _, ratio = _raw_metrics(points, tets)
-    flat = volumes <= 1e-12 * np.ptp(points[tets], axis=1).max(axis=1) ** 3  # the TetMesh zero-volume rule
+    flat = volumes <= ZERO_VOLUME * np.ptp(points[tets], axis=1).max(axis=1) ** 3  # the TetMesh zero-volume rule
     sliver = flat | (ratio < _SLIVER_RADIUS_RATIO)
     keep = inside & ~flat
     logger.info("delaunay: %d points (%d surface, %d lattice, %d band), %d tets, %d kept (%s)", len(points),
