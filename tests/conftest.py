@@ -26,3 +26,30 @@ def cube_mesh(cells=(2, 2, 2), size=(1.0, 1.0, 1.0)) -> TetMesh:
 @pytest.fixture
 def unit_cube() -> TetMesh:
     return cube_mesh()
+
+
+def signal_when_ready(module_argv, ready, signum, *, settle=0.0, timeout=120.0):
+    """Run ``python -m <module_argv>``, send ``signum`` once the file ``ready`` exists (plus ``settle`` s).
+
+    Returns (exit status, stderr). The child is killed if anything goes wrong, so a failing test
+    never leaves a run behind.
+    """
+    import subprocess
+    import sys
+    import time
+
+    child = subprocess.Popen([sys.executable, "-m", *map(str, module_argv)], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + timeout
+        while not Path(ready).exists():
+            assert child.poll() is None and time.monotonic() < deadline, child.communicate()[1]
+            time.sleep(0.01)
+        time.sleep(settle)
+        child.send_signal(signum)
+        _, stderr = child.communicate(timeout=60)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+    return child.returncode, stderr

@@ -10,7 +10,7 @@ from volspring.checkpoint import load_checkpoint
 from volspring.cli import main
 from volspring.output import read_pc2, read_pvd
 
-from conftest import cube_mesh
+from conftest import cube_mesh, signal_when_ready
 
 # A 0.2 m x 0.05 m x 0.05 m box of 4 x 1 x 1 Kuhn cells, clamped at x = 0: tiny and mesher-free.
 PIN_END = ["--pin", "-1,-1,-1,0,1,1"]
@@ -248,24 +248,16 @@ def test_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, beam_fi
 @pytest.mark.parametrize("signal_name, status", [("SIGTERM", 143), ("SIGINT", 130)])
 def test_an_interrupted_run_says_where_it_stopped_in_one_line(tmp_path, signal_name, status):
     import signal
-    import subprocess
-    import sys
-    import time
 
     mesh = tmp_path / "beam.vtu"
     cube_mesh((20, 5, 5), size=(1.0, 0.2, 0.2)).write(mesh)
     out = tmp_path / "out"
     argv = [str(mesh), *PIN_END, "--dt", "0.01", "--frame-dt", "0.01", "--duration", "100", "--out", str(out),
             "--checkpoint-every", "1", "--no-progress"]
-    process = subprocess.Popen([sys.executable, "-m", "volspring.cli", *argv], stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while not (out / "checkpoint.npz").exists() and process.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.01)
-    time.sleep(0.2)  # well into the stepping, frames being written
-    process.send_signal(getattr(signal, signal_name))
-    stdout, stderr = process.communicate(timeout=60)
-    assert process.returncode == status, stderr
+    # Once the first checkpoint exists, well into the stepping while frames are being written.
+    returncode, stderr = signal_when_ready(["volspring.cli", *argv], out / "checkpoint.npz",
+                                           getattr(signal, signal_name), settle=0.2)
+    assert returncode == status, stderr
     lines = stderr.splitlines()
     assert len(lines) == 1 and "Traceback" not in stderr, stderr
     assert re.match(rf"volspring-sim: interrupted by {signal_name}.* at t = [\d.]+ s \(step \d+\); the last checkpoint "

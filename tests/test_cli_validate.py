@@ -3,13 +3,12 @@
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
 
 import pytest
 
 import validation.report
+from conftest import signal_when_ready
 from validation.cli import main
 from volspring._io import is_temporary_name
 from volspring.output import read_manifest
@@ -173,21 +172,11 @@ def test_sigterm_while_writing_leaves_complete_listed_files_only(tmp_path, cache
                                                   (signal.SIGINT, 130, "SIGINT (Ctrl-C)")])
 def test_a_real_signal_gives_one_line_and_its_exit_status(signum, status, name, tmp_path):
     out, cache = tmp_path / "out", tmp_path / "cache"
-    child = subprocess.Popen([sys.executable, "-m", "validation.cli", "--quick", "--out", str(out), "--cache",
-                              str(cache)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.monotonic() + 60
-        while not (out / "volspring-run.json").exists():  # the folder is claimed before the work starts
-            assert child.poll() is None and time.monotonic() < deadline, child.communicate()
-            time.sleep(0.05)
-        time.sleep(0.5)  # into the computation (a --quick run takes about 40 s)
-        child.send_signal(signum)
-        _, stderr = child.communicate(timeout=60)
-    finally:
-        if child.poll() is None:
-            child.kill()
-            child.wait()
-    assert child.returncode == status
+    # The folder is claimed before the work starts; half a second later the --quick run (about 40 s)
+    # is computing.
+    returncode, stderr = signal_when_ready(["validation.cli", "--quick", "--out", out, "--cache", cache],
+                                           out / "volspring-run.json", signum, settle=0.5)
+    assert returncode == status
     last = stderr.strip().split("\r")[-1].split("\n")[-1]  # after the progress bar's line
     assert last.startswith(f"volspring-validate: interrupted by {name}; ") and "Traceback" not in stderr
     assert read_manifest(out)["status"] == "interrupted"

@@ -8,7 +8,7 @@ caller's global random state is never touched.
 
 import numpy as np
 import pytest
-from conftest import cube_mesh
+from conftest import cube_mesh, signal_when_ready
 
 from volspring import Gravity, Material, Pins, Scene, SpringModel
 from volspring.assembly import rigid_body_modes
@@ -61,14 +61,18 @@ def test_repeated_implicit_runs_are_bit_identical(beam_scene):
     assert first.v.tobytes() == second.v.tobytes()
 
 
+def clamped_end(points):
+    """The end face x = 0 of the test beams."""
+    return points[:, 0] < 1e-9
+
+
 def test_fem_modes_are_bit_identical_within_one_process():
     # Without a start vector ARPACK keeps a hidden random state between calls: two identical modal
     # solves differed by 2e-14.
     from validation.fem import solve_modes
 
     mesh = cube_mesh((20, 3, 3), (1.0, 0.2, 0.2))
-    clamp = lambda points: points[:, 0] < 1e-9  # noqa: E731
-    modes = [solve_modes(mesh, (1e6, 0.3, 1e3), clamp=clamp, element="P1", count=4) for _ in range(2)]
+    modes = [solve_modes(mesh, (1e6, 0.3, 1e3), clamp=clamped_end, element="P1", count=4) for _ in range(2)]
     assert modes[0].frequencies.tobytes() == modes[1].frequencies.tobytes()
 
 
@@ -76,11 +80,10 @@ def test_fem_amg_reference_ignores_the_global_generator():
     from validation.fem import solve_static
 
     mesh = cube_mesh((40, 6, 6), (1.0, 0.2, 0.2))  # 2,009 nodes: pyamg's random estimate showed here
-    clamp = lambda points: points[:, 0] < 1e-9  # noqa: E731
     answers = []
     for seed in (5, 6):
         np.random.seed(seed)
-        answers.append(solve_static(mesh, (1e6, 0.3, 1e3), clamp=clamp, gravity=(0, 0, -9.81), element="P1",
+        answers.append(solve_static(mesh, (1e6, 0.3, 1e3), clamp=clamped_end, gravity=(0, 0, -9.81), element="P1",
                                     solver="amg").displacement)
     assert answers[0].tobytes() == answers[1].tobytes()
 
@@ -115,21 +118,14 @@ def test_two_cli_runs_write_bit_identical_checkpoints(tmp_path, big_beam_file):
 
 def test_killed_and_resumed_cli_run_equals_an_uninterrupted_one(tmp_path, big_beam_file):
     import signal
-    import subprocess
-    import sys
-    import time
 
     from volspring.cli import main
 
     assert main([str(big_beam_file), *SIM, "--out", str(tmp_path / "whole"), "--checkpoint-every", "1"]) == 0
     killed = tmp_path / "killed"
-    process = subprocess.Popen([sys.executable, "-m", "volspring.cli", str(big_beam_file), *SIM, "--out", str(killed),
-                                "--checkpoint-every", "1"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    deadline = time.monotonic() + 120
-    while not (killed / "checkpoint.npz").exists() and process.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.01)
-    process.send_signal(signal.SIGKILL)  # no chance to clean up: the hardest interruption
-    process.wait()
+    # SIGKILL as soon as the first checkpoint exists: no chance to clean up, the hardest interruption.
+    signal_when_ready(["volspring.cli", big_beam_file, *SIM, "--out", killed, "--checkpoint-every", "1"],
+                      killed / "checkpoint.npz", signal.SIGKILL)
     stopped_at = _final(killed).step
     assert 0 < stopped_at < 30, "the kill came too late to test a resume"
     status = main([str(big_beam_file), *SIM, "--out", str(killed), "--resume", str(killed / "checkpoint.npz")
