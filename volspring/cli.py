@@ -41,8 +41,6 @@ SURFACE_NAME = "surface"
 PIN_TOLERANCE = 1e-9
 EXIT_INPUT, EXIT_USAGE, EXIT_DIVERGED = 1, 2, 3
 DEFAULT_NU = 0.45
-# Stiffness rules that build pure springs: they take E, never nu (README: the limit of pure springs).
-NU_IGNORING_RULES = ("van_gelder", "lloyd", "uniform")
 VECTOR_OPTIONS = ("--pin", "--gravity")  # comma-separated numbers that may start with a minus sign
 
 
@@ -359,7 +357,7 @@ def _read_mesh(path, units, scale):
 
 def _build_model(args, mesh):
     from volspring.material import Material
-    from volspring.model import SpringModel
+    from volspring.model import NU_IGNORING_RULES, SpringModel
 
     material = Material(E=args.E, nu=DEFAULT_NU if args.nu is None else args.nu, density=args.density)
     if args.nu is not None and args.rule in NU_IGNORING_RULES:

@@ -50,6 +50,8 @@ from volspring.topology import SPRING_KINDS, SpringTopology, vector_lengths
 __all__ = ["STIFFNESS_RULES", "FORCE_LAWS", "SpringModel"]
 
 STIFFNESS_RULES = ("van_gelder", "lloyd", "uniform")
+#: Rules that build pure springs from E alone: they cannot honour a Poisson ratio (the Cauchy limit).
+NU_IGNORING_RULES = STIFFNESS_RULES
 FORCE_LAWS = ("hooke", "strain")
 
 
