@@ -275,7 +275,8 @@ class AMGConjugateGradient(_LinearSolver):
     times on these matrices (REFERENCE.md section 3), so 2 under the bound is about pyamg's 4/3
     under the true radius. Measured on 10k and 50k-node gmsh beams (nu 0.25 and 0.45, dt 1e-3, 1e-2,
     1e-1 s): the same CG iteration counts as the random default in 10 of 12 systems at rtol 1e-3
-    (one more in 2), within one at rtol 1e-6; with omega = 4/3 it took up to 2 more.
+    (one more in 2), within one at rtol 1e-6; with omega = 4/3 it took up to 2 more at rtol 1e-3
+    and 4 more at 1e-6 (``python benchmarks/bench_amg_weighting.py``).
     The block Jacobi smoother is weighted by a Gershgorin bound of D^-1 A per level for the same
     reason (pyamg would estimate its spectral radius from a random vector too).
     """
