@@ -24,8 +24,8 @@ import numpy as np  # noqa: E402
 import pyamg  # noqa: E402
 
 from bench_implicit import MATERIAL, beam_mesh  # noqa: E402
-from volspring import Gravity, Material, Pins, Scene, SpringModel  # noqa: E402
-from volspring.assembly import rigid_body_modes  # noqa: E402
+from meshing.geometry import rigid_body_modes  # noqa: E402
+from volspring import Gravity, Material, Pins, Scene, Model  # noqa: E402
 from volspring.integrators.implicit import ImplicitEuler  # noqa: E402
 from volspring.solvers import PROLONGATION_OMEGA, conjugate_gradient  # noqa: E402
 
@@ -54,8 +54,8 @@ def main():
     for target in args.nodes:
         mesh = beam_mesh(target)
         for material in (MATERIAL, Material(1e7, 0.45, 1100.0)):
-            model = SpringModel.from_mesh(mesh, material, rule="van_gelder", damping_ratio=0.05)
-            scene = Scene(model, forces=[Gravity(model.masses)],
+            model = Model.from_mesh(mesh, material, rule="van_gelder", damping_ratio=0.05)
+            scene = Scene(model, forces=[Gravity()],
                           pins=Pins(np.flatnonzero(mesh.points[:, 0] < 1e-9)))
             for dt in (1e-3, 1e-2, 1e-1):
                 matrix, _, pattern = ImplicitEuler().linear_system(scene, scene.initial_state(), dt)

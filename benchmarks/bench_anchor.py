@@ -25,9 +25,8 @@ import numpy as np
 import trimesh
 from scipy.spatial import Delaunay
 
-from meshing import anchor
-from volspring import TetMesh
-from volspring.mesh import signed_tet_volumes
+from meshing import TetMesh, anchor
+from meshing.geometry import signed_tet_volumes
 
 
 def lattice_mesh(cells: int, *, seed: int = 0) -> TetMesh:

@@ -1,7 +1,7 @@
 """Time collisions per step at about 1k, 10k and 50k tets: detection, depths, penalty forces, Jacobian.
 
 Two Kuhn-split unit boxes, the second tilted and pushed a third of its width into the first, as two
-bodies of one spring model (:func:`volspring.collision.assemble_bodies`) with a frictional
+bodies of one model (:meth:`volspring.Model.from_bodies`) with a frictional
 :class:`~volspring.collision.ContactForce`. For each size the script prints the colliding points
 (contacts), then, per step:
 
@@ -30,9 +30,10 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from meshing import structured_box
-from volspring import Material
+from volspring import Material, Model
 from volspring.assembly import stiffness_matrix
-from volspring.collision import Body, ContactForce, assemble_bodies, consistent_penetration_depths, detect_collisions
+from volspring.bodies import Body
+from volspring.collision import ContactForce, consistent_penetration_depths, detect_collisions
 
 PUBLISHED_DETECTION_MS = {1_000: 4.3, 10_000: 30.4, 20_000: 70.0, 50_000: 172.5}
 
@@ -44,8 +45,8 @@ def contact_scene(total_tets):
     tilt = Rotation.from_rotvec([0.1, 0.2, 0.05]).as_matrix()
     offset = np.array([0.5 + 0.67, 0.55, 0.45]) - tilt @ [0.5, 0.5, 0.5]  # (x - 0.5) R^T + c = x R^T + offset
     material = Material(E=1e5, nu=0.3, density=1000.0)
-    system = assemble_bodies([Body(mesh, material), Body(mesh, material, rotation=tilt, translation=offset)])
-    return system, ContactForce(system, friction=0.3)
+    model = Model.from_bodies([Body(mesh, material), Body(mesh, material, rotation=tilt, translation=offset)])
+    return model, ContactForce(model, friction=0.3)
 
 
 def best_time(function, repeat):
@@ -67,23 +68,23 @@ def main(argv=None) -> int:
           f"{'force ms':>8} {'jacobian ms':>11} {'us/contact':>10} {'SpMV ms':>8} {'step/SpMV':>9}")
     rng = np.random.default_rng(0)
     for size in args.sizes:
-        system, contact = contact_scene(size)
-        bodies = system.collision_bodies
-        x = np.array(system.model.rest_positions)
+        model, contact = contact_scene(size)
+        bodies = contact.bodies  # the model's tet mesh split by node_body
+        x = np.array(model.rest_positions)
         v = rng.normal(scale=0.1, size=x.shape)
         out = np.zeros_like(x)
 
         def force():
             contact._cache = None  # detect afresh, as at every new step or stage
-            contact.accumulate(x, v, 0.0, out)
+            contact.accumulate(model, x, v, 0.0, out)
             return contact.contacts(x)
 
         found = force()  # warm caches (edges, faces, adjacency are built once per scene)
         detect, hits = best_time(lambda: detect_collisions(bodies, x), args.repeat)
         depth, _ = best_time(lambda: consistent_penetration_depths(bodies, x, hits), args.repeat)
         forces, _ = best_time(force, args.repeat)
-        jacobian, _ = best_time(lambda: contact.jacobian(x, v, 0.0), args.repeat)
-        matrix, vector = stiffness_matrix(system.model), np.ones(3 * system.model.node_count)
+        jacobian, _ = best_time(lambda: contact.jacobian(model, x, v, 0.0), args.repeat)
+        matrix, vector = stiffness_matrix(model), np.ones(3 * model.node_count)
         spmv, _ = best_time(lambda: matrix @ vector, 20 * args.repeat)
         nearest = min(PUBLISHED_DETECTION_MS, key=lambda t: abs(np.log(t / bodies.tet_count)))
         paper = PUBLISHED_DETECTION_MS[nearest] * bodies.tet_count / nearest  # linear in tets, as published

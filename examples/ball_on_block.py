@@ -1,6 +1,6 @@
 """A soft ball dropped on a soft block, written for ParaView.
 
-Both bodies are meshed by gmsh, assembled into one spring model (:func:`assemble_bodies`), and
+Both bodies are meshed by gmsh, assembled into one model (:meth:`volspring.Model.from_bodies`), and
 stepped by implicit Euler with gravity and the penalty contact of consistent penetration depths
 (:class:`ContactForce`, whose Jacobian enters the implicit system). The block is pinned at its
 bottom face. Output: ``OUTPUT/ball_on_block.pvd`` with one VTU per frame (tets, point data
@@ -33,10 +33,12 @@ SETTINGS = {
 
 @dataclass
 class BallOnBlock:
-    """The scene and what a caller checks: the assembled bodies, the contact force, the ball's weight."""
+    """The scene and what a caller checks: the model of both bodies (block 0, ball 1), its initial
+    velocities, the contact force, the ball's weight."""
 
     scene: object
-    system: object
+    model: object
+    velocities: object
     contact: object
     ball_weight: float
 
@@ -63,27 +65,27 @@ def build(*, size, radius=0.05, block=(0.2, 0.2, 0.06), gap=0.01, ball_material=
     """
     from meshing.shapes import box, sphere
     from meshing.tetrahedralize import tetrahedralize
-    from volspring import Gravity, Material, Pins, Scene
-    from volspring.collision.contact import ContactForce
-    from volspring.collision.multibody import Body, assemble_bodies
+    from volspring import Gravity, Material, Model, Pins, Scene
+    from volspring.bodies import Body, initial_velocities
+    from volspring.collision import ContactForce
 
     soft = Material(E=1e5, nu=0.3, density=1000.0)
     ball_material = ball_material or soft
     block_material = block_material or soft
     ball = tetrahedralize(sphere(radius), size=size, seed=1)
     slab = tetrahedralize(box(*block), size=size, seed=1)
-    system = assemble_bodies([
+    bodies = [
         Body(slab, block_material, translation=(0.0, 0.0, -block[2] / 2), damping_ratio=damping_ratio,
              name="block"),
         Body(ball, ball_material, translation=(0.0, 0.0, radius + gap), damping_ratio=damping_ratio, name="ball"),
-    ])
-    model = system.model
-    block_nodes = system.mesh_nodes[0]
+    ]
+    model = Model.from_bodies(bodies)
+    block_nodes = model.body_nodes(0)
     bottom = block_nodes[model.rest_positions[block_nodes, 2] < -block[2] + 1e-9]
-    contact = ContactForce(system, stiffness_factor=stiffness_factor, friction=friction)
-    scene = Scene(model, forces=[Gravity(model.masses), contact], pins=Pins(bottom))
-    weight = float(system.body_masses[1] * 9.81)
-    return BallOnBlock(scene, system, contact, weight)
+    contact = ContactForce(model, stiffness_factor=stiffness_factor, friction=friction)
+    scene = Scene(model, forces=[Gravity(), contact], pins=Pins(bottom))
+    weight = float(model.body_masses[1] * 9.81)
+    return BallOnBlock(scene, model, initial_velocities(bodies, model), contact, weight)
 
 
 def run(output, *, quick=False, size=None, duration=None, dt=None, frame_dt=None):
@@ -97,10 +99,10 @@ def run(output, *, quick=False, size=None, duration=None, dt=None, frame_dt=None
         if value is not None:
             settings[key] = value
     setup = build(size=settings["size"])
-    writer = ParaViewWriter(output, setup.system.model, name="ball_on_block", springs=False)
+    writer = ParaViewWriter(output, setup.model, name="ball_on_block", springs=False)
     result = simulate(setup.scene, make_integrator("implicit_euler"), duration=settings["duration"],
                       dt=settings["dt"], frame_dt=settings["frame_dt"], callback=writer,
-                      state=setup.scene.initial_state(v=setup.system.initial_velocities), guard="off")
+                      state=setup.scene.initial_state(v=setup.velocities), guard="off")
     return setup, result
 
 
@@ -116,8 +118,8 @@ def main(argv=None) -> int:
     start = time.perf_counter()
     setup, result = run(args.output, quick=args.quick, size=args.size, duration=args.duration, dt=args.dt)
     depth = setup.contact.contacts(result.state.x).max_depth
-    edge = float(setup.system.edge_length.min())
-    print(f"{setup.system}: {result.steps_taken} steps, {result.frame_count} frames in "
+    edge = float(setup.contact.bodies.mean_edge_lengths.min())
+    print(f"{setup.model}: {result.steps_taken} steps, {result.frame_count} frames in "
           f"{time.perf_counter() - start:.1f} s")
     print(f"deepest contact at the end: {depth * 1e3:.3f} mm = {depth / edge:.3f} edge lengths")
     print(f"open {args.output}/ball_on_block.pvd in ParaView")

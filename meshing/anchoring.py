@@ -6,7 +6,8 @@ surface follows the same map, also for vertices outside the mesh, whose weights 
 
 Point location is a uniform grid over the tets' bounding boxes (the spatial hashing of Teschner et al. 2003, with
 a sorted key array in place of a hash table), candidates tested in batches; vertices found in no tet go to their
-nearest boundary face (a k-d tree over face centroids with an exact bound) and take that face's tet.
+nearest boundary face (:func:`meshing.geometry.nearest_surface_points`) and take that face's tet. The barycentric
+maps and the inside test are :func:`meshing.geometry.barycentric_frames`, shared with collision detection.
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ from functools import cached_property
 
 import numpy as np
 
-from volspring.mesh import TetMesh
+from meshing.geometry import BarycentricFrames, barycentric_frames, nearest_surface_points
+from meshing.mesh import TetMesh
+from meshing.tolerances import ON_SURFACE
 
 __all__ = ["Anchor", "anchor"]
 
@@ -117,7 +120,7 @@ class Anchor:
         )
 
 
-def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = 1e-9, max_distance: float | None = None) -> Anchor:
+def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = ON_SURFACE, max_distance: float | None = None) -> Anchor:
     """Bind every vertex of a render surface to the tet containing it, by barycentric weights.
 
     Parameters
@@ -126,7 +129,7 @@ def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = 1e-9, max_distance:
     surface : trimesh.Trimesh or (p, 3) float -- the render surface (its ``vertices`` and ``faces``) or bare
         vertex positions [m]
     tolerance : float -- a vertex counts as inside a tet when all its barycentric weights are >= -tolerance
-        (round-off of vertices on faces); default 1e-9
+        (round-off of vertices on faces); default :data:`meshing.tolerances.ON_SURFACE` (1e-9)
     max_distance : float or None -- refuse vertices farther than this outside the tet mesh [m]; None (default)
         anchors every vertex, however far, and logs a warning past one mean tet size
 
@@ -147,8 +150,7 @@ def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = 1e-9, max_distance:
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import TetMesh
-    >>> from meshing import anchor
+    >>> from meshing import TetMesh, anchor
     >>> mesh = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
     >>> bound = anchor(mesh, np.array([[0.1, 0.2, 0.3], [0.5, 0.5, 0.5]]))
     >>> bound.outside.tolist(), np.allclose(bound.deform(2 * mesh.points), 2 * bound.points)
@@ -159,18 +161,19 @@ def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = 1e-9, max_distance:
         raise ValueError(f"tolerance = {tolerance!r} is not >= 0 and finite; expected a barycentric tolerance")
     if max_distance is not None and not (isinstance(max_distance, (int, float, np.floating)) and max_distance >= 0):
         raise ValueError(f"max_distance = {max_distance!r} is not >= 0; expected a distance [m] or None")
-    inverse, origin = _barycentric_frames(tet_mesh)
-    tet_index = _locate(tet_mesh, points, inverse, origin, tolerance)
+    frames = barycentric_frames(tet_mesh.points[tet_mesh.tets])
+    tet_index = _locate(tet_mesh, points, frames, tolerance)
     outside = tet_index < 0
     distance = np.zeros(len(points))
     if outside.any():
-        face, distance[outside] = _nearest_boundary_face(tet_mesh, points[outside])
+        face, _, _, distance[outside] = nearest_surface_points(points[outside], tet_mesh.points,
+                                                               tet_mesh.boundary_faces)
         tet_index[outside] = tet_mesh.boundary_face_tets[face]
-    weights = _weights(points, tet_index, inverse, origin)
+    weights = frames.weights(points, tet_index)
     # One step of iterative refinement: the residual of sum w x against the vertex, mapped back to weights.
     nodes = tet_mesh.tets[tet_index]
     residual = points - np.einsum("pj,pjd->pd", weights, tet_mesh.points[nodes])
-    step = np.einsum("pij,pj->pi", inverse[tet_index], residual)
+    step = np.einsum("pij,pj->pi", frames.inverse[tet_index], residual)
     weights[:, 1:] += step
     weights[:, 0] -= step.sum(axis=1)
 
@@ -217,20 +220,7 @@ def _surface_arrays(surface):
     return points, faces
 
 
-def _barycentric_frames(mesh: TetMesh):
-    """Per tet the inverse of A = [x1 - x0, x2 - x0, x3 - x0] (m, 3, 3) and x0 (m, 3)."""
-    corners = mesh.points[mesh.tets]
-    frame = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 0]], -1)
-    return np.linalg.inv(frame), corners[:, 0]
-
-
-def _weights(points, tets, inverse, origin) -> np.ndarray:
-    """(q, 4) barycentric weights of points[i] in tet tets[i] (extrapolated where outside)."""
-    beta = np.einsum("qij,qj->qi", inverse[tets], points - origin[tets])
-    return np.concatenate([1.0 - beta.sum(axis=1, keepdims=True), beta], axis=1)
-
-
-def _locate(mesh: TetMesh, points, inverse, origin, tolerance) -> np.ndarray:
+def _locate(mesh: TetMesh, points, frames: BarycentricFrames, tolerance) -> np.ndarray:
     """(p,) int64 -- a tet containing each point (the deepest of those tested), -1 where none does.
 
     Two stages: the tets of the ``NEAREST_CENTROIDS`` nearest centroids (cheap, resolves most inside points),
@@ -242,14 +232,14 @@ def _locate(mesh: TetMesh, points, inverse, origin, tolerance) -> np.ndarray:
     k = min(NEAREST_CENTROIDS, mesh.tet_count)
     _, nearest = cKDTree(corners.mean(axis=1)).query(points, k=k)
     found = _deepest_inside(np.repeat(np.arange(len(points)), k), nearest.ravel(), len(points),
-                            points, inverse, origin, tolerance)
+                            points, frames, tolerance)
     left = np.flatnonzero(found < 0)
     if len(left):
-        found[left] = _locate_in_grid(corners, points[left], inverse, origin, tolerance)
+        found[left] = _locate_in_grid(corners, points[left], frames, tolerance)
     return found
 
 
-def _deepest_inside(point_of, tet, point_count, points, inverse, origin, tolerance) -> np.ndarray:
+def _deepest_inside(point_of, tet, point_count, points, frames: BarycentricFrames, tolerance) -> np.ndarray:
     """(point_count,) int64 -- per point the candidate tet where it is deepest, if inside it; -1 otherwise.
 
     ``point_of`` (c,) and ``tet`` (c,) are the candidate pairs, ``point_of`` non-decreasing.
@@ -257,7 +247,7 @@ def _deepest_inside(point_of, tet, point_count, points, inverse, origin, toleran
     found = np.full(point_count, -1, dtype=np.int64)
     if len(point_of) == 0:
         return found
-    depth = _weights(points[point_of], tet, inverse, origin).min(axis=1)
+    depth = frames.weights(points[point_of], tet).min(axis=1)
     # The deepest candidate of each point without sorting: the group maxima by reduceat over the runs of
     # ``point_of``, then the first pair of each point that reaches its maximum.
     starts = np.flatnonzero(np.r_[True, point_of[1:] != point_of[:-1]])
@@ -270,7 +260,7 @@ def _deepest_inside(point_of, tet, point_count, points, inverse, origin, toleran
     return found
 
 
-def _locate_in_grid(corners, points, inverse, origin, tolerance) -> np.ndarray:
+def _locate_in_grid(corners, points, frames: BarycentricFrames, tolerance) -> np.ndarray:
     """(q,) int64 -- like :func:`_locate`, testing every tet whose bounding box overlaps the point's cell."""
     low, high = corners.min(axis=1), corners.max(axis=1)
     grid_origin = low.min(axis=0)
@@ -315,75 +305,10 @@ def _locate_in_grid(corners, points, inverse, origin, tolerance) -> np.ndarray:
         run_start = np.repeat(start[begin:end] - np.cumsum(batch_count) + batch_count, batch_count)
         slot = run_start + np.arange(len(point_of))
         found[begin:end] = _deepest_inside(point_of, tet_of[slot], end - begin, points[begin:end],
-                                           inverse, origin, tolerance)
+                                           frames, tolerance)
     return found
 
 
 def _cell_keys(i, j, k, shape) -> np.ndarray:
     """Linear index of grid cells (i, j, k) in a grid of ``shape`` cells."""
     return i + shape[0] * (j + shape[1] * k)
-
-
-def _nearest_boundary_face(mesh: TetMesh, points):
-    """Index into ``mesh.boundary_faces`` of the face nearest to each point (q,), and that distance (q,)."""
-    from scipy.spatial import cKDTree
-
-    triangles = mesh.points[mesh.boundary_faces]
-    centroids = triangles.mean(axis=1)
-    reach = np.linalg.norm(triangles - centroids[:, None], axis=2).max()
-    tree = cKDTree(centroids)
-    best_face = np.zeros(len(points), dtype=np.int64)
-    best = np.full(len(points), np.inf)
-    todo = np.arange(len(points))
-    k = min(8, len(centroids))
-    while len(todo):
-        centroid_distance, candidate = tree.query(points[todo], k=k)
-        centroid_distance, candidate = centroid_distance.reshape(len(todo), k), candidate.reshape(len(todo), k)
-        distance = _point_triangle_distance(np.repeat(points[todo], k, axis=0), triangles[candidate.ravel()])
-        distance = distance.reshape(len(todo), k)
-        pick = distance.argmin(axis=1)
-        best[todo] = distance[np.arange(len(todo)), pick]
-        best_face[todo] = candidate[np.arange(len(todo)), pick]
-        # Exact once every face not yet seen is farther: its centroid is beyond best + reach (the largest
-        # centroid-to-corner distance), so its triangle is beyond best.
-        if k == len(centroids):
-            break
-        todo = todo[centroid_distance[:, -1] <= best[todo] + reach]
-        k = min(2 * k, len(centroids))
-    return best_face, best
-
-
-def _point_triangle_distance(p, triangles) -> np.ndarray:
-    """(q,) float -- distance from p[i] (q, 3) to triangle triangles[i] (q, 3, 3), by Voronoi regions (Ericson)."""
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    ab, ac, ap = b - a, c - a, p - a
-    bp, cp = p - b, p - c
-
-    def dot(u, v):
-        return np.einsum("ij,ij->i", u, v)
-
-    d1, d2 = dot(ab, ap), dot(ac, ap)
-    d3, d4 = dot(ab, bp), dot(ac, bp)
-    d5, d6 = dot(ab, cp), dot(ac, cp)
-    va = d3 * d6 - d5 * d4
-    vb = d5 * d2 - d1 * d6
-    vc = d1 * d4 - d3 * d2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        denominator = va + vb + vc
-        v_face = vb / denominator
-        w_face = vc / denominator
-        t_ab = d1 / (d1 - d3)
-        t_ac = d2 / (d2 - d6)
-        t_bc = (d4 - d3) / ((d4 - d3) + (d5 - d6))
-    closest = a + v_face[:, None] * ab + w_face[:, None] * ac
-    # Ericson's tests run A, B, AB, C, AC, BC, face with early exit; applied here in reverse so the earlier win.
-    in_bc = (va <= 0) & (d4 - d3 >= 0) & (d5 - d6 >= 0)
-    closest = np.where(in_bc[:, None], b + t_bc[:, None] * (c - b), closest)
-    in_ac = (vb <= 0) & (d2 >= 0) & (d6 <= 0)
-    closest = np.where(in_ac[:, None], a + t_ac[:, None] * ac, closest)
-    closest = np.where(((d6 >= 0) & (d5 <= d6))[:, None], c, closest)
-    in_ab = (vc <= 0) & (d1 >= 0) & (d3 <= 0)
-    closest = np.where(in_ab[:, None], a + t_ab[:, None] * ab, closest)
-    closest = np.where(((d3 >= 0) & (d4 <= d3))[:, None], b, closest)
-    closest = np.where(((d1 <= 0) & (d2 <= 0))[:, None], a, closest)
-    return np.linalg.norm(p - closest, axis=1)

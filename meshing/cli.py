@@ -5,6 +5,13 @@ Examples
 ``volspring-mesh box:1,0.1,0.1 -o beam.vtu --size 0.025``
 ``volspring-mesh bunny.obj -o bunny.msh --size 0.005 --method delaunay --seed 1 --shells 2 --shell-thickness 0.002``
 ``volspring-mesh bunny_in_mm.stl --units mm -o bunny.vtu --size 5``  (5 mm tets; the mesh is written in metres)
+``volspring-mesh sphere:0.1 -o ball.vstopo.npz --size 0.02 --shells 1 --shell-thickness 0.005``
+
+Shells have no place in a tet mesh format. An output named ``*.npz`` (by convention ``NAME.vstopo.npz``)
+is written as a spring topology file (:mod:`meshing.topology_io`: the tet mesh with its shell nodes,
+springs and triangles), which ``volspring-sim`` reads as its INPUT. An output in a mesh format
+(``.vtu``, ``.msh``, ...) with ``--shells`` gets that file beside it as well, ``NAME.vstopo.npz``
+(:func:`sidecar_path`), so the shells are never lost; without ``--shells`` only the mesh is written.
 """
 
 from __future__ import annotations
@@ -18,7 +25,7 @@ import time
 import warnings
 from pathlib import Path
 
-__all__ = ["main"]
+__all__ = ["main", "sidecar_path"]
 
 PROG = "volspring-mesh"
 
@@ -35,13 +42,16 @@ class _Parser(argparse.ArgumentParser):
 def _parser() -> argparse.ArgumentParser:
     from meshing.shapes import SHAPE_NAMES
     from meshing.tetrahedralize import METHODS
-    from volspring.units import add_unit_arguments
+    from meshing.units import add_unit_arguments
 
     parser = _Parser(prog=PROG, description="Fill a closed surface or a built-in shape with tetrahedra.")
     parser.add_argument("input", help=f"a surface file (stl, obj, ply, off, ...) or a shape such as box:1,0.1,0.1 "
                                       f"({', '.join(SHAPE_NAMES)})")
     parser.add_argument("-o", "--output", required=True, type=Path,
-                        help="the tet mesh file to write; its extension names the format (vtu, msh, xdmf, mesh, ...)")
+                        help="the file to write; its extension names the format: a tet mesh (vtu, msh, xdmf, mesh, "
+                             "...), or .npz (by convention NAME.vstopo.npz) for a spring topology file, the tet mesh "
+                             "with its shells, which volspring-sim reads. With --shells and a tet mesh format the "
+                             "topology file is written beside the mesh too, as NAME.vstopo.npz")
     parser.add_argument("--size", required=True, type=float, help="target tet edge length, in --units")
     parser.add_argument("--method", choices=METHODS, default="gmsh", help="meshing backend (default gmsh)")
     parser.add_argument("--shells", type=int, default=0, metavar="N", help="number of virtual shell layers")
@@ -56,24 +66,42 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _output_format(path: Path) -> str:
-    """The meshio format for the output's extension, and whether it can be written there, checked before any
-    meshing is done."""
-    from volspring.mesh import mesh_file_format
+def sidecar_path(path) -> Path:
+    """The spring topology file written beside a tet mesh output with ``--shells``: ``NAME.vstopo.npz``.
+
+    >>> sidecar_path("out/beam.vtu").as_posix()
+    'out/beam.vstopo.npz'
+    """
+    from meshing.topology_io import TOPOLOGY_SUFFIX
+
+    path = Path(path)
+    return path.with_name(path.stem + TOPOLOGY_SUFFIX)
+
+
+def _output_format(path: Path, *, shells: bool = False):
+    """The meshio format for the output's extension (None for a spring topology file), and whether it can be
+    written there, checked before any meshing is done."""
+    from meshing.mesh_io import mesh_file_format
+    from meshing.topology_io import is_topology_path
 
     if path.is_dir():
         raise ValueError(f"output {path} is a directory; expected a mesh file to write")
+    if shells and not is_topology_path(path) and sidecar_path(path).is_dir():
+        raise ValueError(f"cannot write the shells of output {path} to {sidecar_path(path)}: it is a directory")
     # The nearest folder that exists: the write creates the missing ones below it.
     existing = next(parent for parent in path.parents if parent.exists() or parent == parent.parent)
     if existing.exists() and not existing.is_dir():
         raise ValueError(f"cannot write output {path}: {existing} is a file, not a directory")
     if existing.is_dir() and not os.access(existing, os.W_OK | os.X_OK):
         raise ValueError(f"cannot write output {path}: no permission to create files in {existing}")
+    if is_topology_path(path):
+        return None
     try:
         file_format = mesh_file_format(path)
     except ValueError:
         raise ValueError(f"cannot tell the mesh format of output {str(path)!r} from its extension "
-                         f"{path.suffix!r}; use e.g. .vtu, .msh, .xdmf or .mesh") from None
+                         f"{path.suffix!r}; use e.g. .vtu, .msh, .xdmf or .mesh (or .vstopo.npz for the "
+                         "spring topology with shells)") from None
     if file_format == "xdmf" and path.with_suffix(".h5").is_dir():
         raise ValueError(f"cannot write output {path}: its heavy data goes to {path.with_suffix('.h5')}, "
                          "which is a directory")
@@ -84,7 +112,7 @@ def _read_input(text: str, units: str, scale):
     """A Shape for a built-in spec, else a checked surface, in metres; the body's own volume; a description."""
     from meshing.shapes import Shape, looks_like_shape, parse_shape
     from meshing.surface import load_surface
-    from volspring.units import length_factor
+    from meshing.units import length_factor
 
     factor = length_factor(units, scale)
     converted = "" if factor == 1.0 else f" (x{factor:g} to m)"
@@ -100,14 +128,12 @@ def _read_input(text: str, units: str, scale):
 
 
 def _run(args) -> str:
-    from volspring import SpringTopology
-
     from meshing.quality import quality_summary
     from meshing.tetrahedralize import tetrahedralize
+    from meshing.topology import SpringTopology
+    from meshing.units import UNITS
 
-    from volspring.units import UNITS
-
-    file_format = _output_format(args.output)
+    file_format = _output_format(args.output, shells=args.shells > 0)
     if args.scale is not None and not (math.isfinite(args.scale) and args.scale > 0):
         raise ValueError(f"--scale = {args.scale} is not a finite number > 0")
     if not args.size > 0:
@@ -128,7 +154,7 @@ def _run(args) -> str:
     else:
         topology = SpringTopology.from_mesh(mesh)
     quality = quality_summary(mesh)
-    mesh.write(args.output, file_format=file_format)
+    wrote = _write(args.output, file_format, mesh, topology, args.shells)
 
     relative = (mesh.volume - surface_volume) / surface_volume
     springs = ", ".join(f"{count} {kind}" for kind, count in topology.kind_counts().items() if count)
@@ -142,10 +168,34 @@ def _run(args) -> str:
         f"springs: {topology.spring_count} ({springs})",
         f"volume: tets {mesh.volume:.6g} m^3, surface {surface_volume:.6g} m^3, relative difference {relative:+.3e}",
         str(quality),
-        f"wrote {args.output} ({file_format}" + ("; the tet mesh only, not the shell nodes and springs)"
-                                                 if args.shells else ")"),
+        wrote,
     ]
     return "\n".join(lines)
+
+
+def _write(output: Path, file_format, mesh, topology, shells: int) -> str:
+    """Write the output (and with shells and a mesh format, the topology file beside it); say what was written.
+
+    Either every file is written or none is left: the topology goes first and is removed if the mesh fails.
+    """
+    from meshing.topology_io import write_topology
+
+    layers = f"{shells} shell layer(s)" if shells else "no shells"
+    if file_format is None:
+        write_topology(output, topology)
+        return f"wrote {output} (spring topology: the tet mesh and {layers}; volspring-sim reads it)"
+    if not shells:
+        mesh.write(output, file_format=file_format)
+        return f"wrote {output} ({file_format})"
+    sidecar = sidecar_path(output)
+    write_topology(sidecar, topology)
+    try:
+        mesh.write(output, file_format=file_format)
+    except BaseException:
+        sidecar.unlink(missing_ok=True)
+        raise
+    return (f"wrote {output} ({file_format}; the tet mesh only) and {sidecar} (spring topology: the tet mesh and "
+            f"{layers}; volspring-sim reads it)")
 
 
 def main(argv=None) -> int:

@@ -10,7 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from volspring.mesh import TET_EDGES, TET_FACES, ZERO_VOLUME, TetMesh, signed_tet_volumes
+from meshing.geometry import signed_tet_volumes, triangle_area_normals
+from meshing.mesh import TET_EDGES, TET_FACES, TetMesh
+from meshing.tolerances import ZERO_VOLUME
 
 __all__ = [
     "POOR_DIHEDRAL_DEGREES",
@@ -46,7 +48,7 @@ def _arrays(mesh_or_points, tets=None):
 
 def _checked_volumes(points, tets):
     volumes = signed_tet_volumes(points, tets)
-    # The TetMesh rule (volspring.mesh.ZERO_VOLUME): |V| below 1e-12 l^3 is the round-off of a flat tet.
+    # The TetMesh rule (meshing.tolerances.ZERO_VOLUME): |V| below 1e-12 l^3 is the round-off of a flat tet.
     scale = np.ptp(points[tets], axis=1).max(axis=1) ** 3
     bad = volumes <= ZERO_VOLUME * scale
     if bad.any():
@@ -62,8 +64,8 @@ def _raw_metrics(points, tets):
     """Signed volume, minimum dihedral angle [degrees] and radius ratio, with no validity check."""
     x = points[tets]
     volumes = signed_tet_volumes(points, tets)
-    faces = x[:, TET_FACES]  # (m, 4, 3, 3)
-    normals = 0.5 * np.cross(faces[:, :, 1] - faces[:, :, 0], faces[:, :, 2] - faces[:, :, 0])  # outward, |n| = area
+    # The four faces of each tet, wound outward: normals (m, 4, 3) of length their area.
+    normals = 0.5 * triangle_area_normals(points, tets[:, TET_FACES].reshape(-1, 3)).reshape(-1, 4, 3)
     areas = np.linalg.norm(normals, axis=2)
     unit = normals / np.where(areas > 0, areas, 1.0)[..., None]
     # The interior dihedral angle at an edge is pi minus the angle between the outward normals of its faces.
@@ -203,7 +205,7 @@ def quality_summary(mesh_or_points, tets=None) -> QualitySummary:
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import TetMesh
+    >>> from meshing import TetMesh
     >>> mesh = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
     >>> summary = quality_summary(mesh)
     >>> summary.tet_count, round(summary.dihedral_min, 2), summary.poor_radius_ratio_count

@@ -12,6 +12,8 @@ from typing import Callable
 
 import numpy as np
 
+from meshing.geometry import triangle_area_normals
+
 __all__ = ["SHAPE_NAMES", "Shape", "box", "cylinder", "ellipsoid", "parse_shape", "sphere", "torus"]
 
 
@@ -146,9 +148,8 @@ def _welded(parts):
     offsets = np.cumsum([0] + [len(v) for v, _ in parts[:-1]])
     faces = np.concatenate([f + offset for (_, f), offset in zip(parts, offsets)])
     # The shapes welded here are convex and centred on the origin: outward means away from it.
-    corners = vertices[faces]
-    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-    inward = np.einsum("ij,ij->i", normals, corners.mean(axis=1)) < 0
+    normals = triangle_area_normals(vertices, faces)
+    inward = np.einsum("ij,ij->i", normals, vertices[faces].mean(axis=1)) < 0
     faces[inward] = faces[inward][:, ::-1]
     mesh = trimesh.Trimesh(vertices, faces, process=False)
     mesh.merge_vertices()

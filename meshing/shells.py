@@ -7,7 +7,7 @@ surface's area-weighted vertex normals by ``thickness`` more than the one below.
 - to the one-ring neighbours of that source vertex by diagonal springs (``shell_diagonal``),
 - to its neighbours within its own layer by springs along the shell's surface edges (``shell_edge``).
 
-The result is a :class:`volspring.SpringTopology`, so the spring model consumes tet edges and shell springs alike.
+The result is a :class:`meshing.SpringTopology`, so the spring model consumes tet edges and shell springs alike.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ import numbers
 
 import numpy as np
 
-from volspring.mesh import TetMesh
-from volspring.topology import SPRING_KINDS, SpringTopology
+from meshing.geometry import area_weighted_vertex_normals, triangle_area_normals
+from meshing.mesh import TetMesh
+from meshing.topology import SPRING_KINDS, SpringTopology
 
 __all__ = ["add_shells"]
 
@@ -69,8 +70,7 @@ def add_shells(mesh: TetMesh, *, layers: int, thickness: float) -> SpringTopolog
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import TetMesh
-    >>> from meshing.shells import add_shells
+    >>> from meshing import TetMesh, add_shells
     >>> mesh = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
     >>> topology = add_shells(mesh, layers=2, thickness=0.05)
     >>> topology.node_count, topology.kind_counts()
@@ -89,7 +89,7 @@ def add_shells(mesh: TetMesh, *, layers: int, thickness: float) -> SpringTopolog
     edges = np.unique(np.sort(local_faces[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1), axis=0)
     # Both directions of each surface edge: shell vertex u -> neighbour v of its source, one diagonal each.
     directed = np.concatenate([edges, edges[:, ::-1]])
-    surface_face_normals = _face_cross(surface_points, local_faces)
+    surface_face_normals = triangle_area_normals(surface_points, local_faces)
 
     kind = {name: np.int8(code) for code, name in enumerate(SPRING_KINDS)}
     points = [mesh.points]
@@ -101,7 +101,7 @@ def add_shells(mesh: TetMesh, *, layers: int, thickness: float) -> SpringTopolog
     for layer in range(1, layers + 1):
         layer_points = surface_points + (layer * thickness) * normals
         layer_nodes = mesh.node_count + (layer - 1) * vertex_count + np.arange(vertex_count)
-        layer_face_normals = _face_cross(layer_points, local_faces)
+        layer_face_normals = triangle_area_normals(layer_points, local_faces)
         _check_offset(layer, thickness, layers, layer_face_normals, below_face_normals, surface_face_normals,
                       local_faces, surface_nodes)
         points.append(layer_points)
@@ -148,30 +148,17 @@ def _checked_thickness(thickness) -> float:
     return float(thickness)
 
 
-def _face_cross(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(f, 3) float -- cross product of each triangle's edges: twice its area times its right-hand unit normal."""
-    corners = points[faces]
-    return np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
-
-
 def _vertex_normals(points: np.ndarray, faces: np.ndarray, node_ids: np.ndarray) -> np.ndarray:
-    """(v, 3) float -- unit area-weighted vertex normals of a triangle surface."""
-    cross = _face_cross(points, faces)
-    corner_vertex = faces.ravel()
-    summed = np.stack(
-        [np.bincount(corner_vertex, weights=np.repeat(cross[:, d], 3), minlength=len(points)) for d in range(3)],
-        axis=1,
-    )
-    length = np.linalg.norm(summed, axis=1)
-    # A normal shorter than 1e-12 of the faces' own summed area is round-off of faces that cancel out.
-    area_scale = np.bincount(corner_vertex, weights=np.repeat(np.linalg.norm(cross, axis=1), 3), minlength=len(points))
-    degenerate = length <= 1e-12 * area_scale
+    """(v, 3) float -- unit area-weighted vertex normals of a triangle surface, refusing vertices without one."""
+    normals = area_weighted_vertex_normals(points, faces)
+    # Zero rows: faces that cancel out (meshing.tolerances.CANCELLED); every vertex here is on some face.
+    degenerate = ~normals.any(axis=1)
     if degenerate.any():
         raise ValueError(
             f"{degenerate.sum()} boundary node(s) have no outward normal (their faces cancel out), first is node "
             f"{node_ids[np.flatnonzero(degenerate)[0]]}; shells cannot be offset from there"
         )
-    return summed / length[:, None]
+    return normals
 
 
 def _check_offset(layer, thickness, layers, cross, below_cross, surface_cross, faces, node_ids) -> None:

@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from volspring.mesh import TetMesh, signed_tet_volumes
+from meshing.geometry import signed_tet_volumes
+from meshing.mesh import TetMesh
 
 __all__ = ["KUHN_PATHS", "structured_box"]
 

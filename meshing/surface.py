@@ -14,6 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
+from meshing.geometry import signed_volumes
+from meshing.tolerances import CONTACT_NUDGE, LARGEST_COORDINATE, ZERO_VOLUME
+from meshing.units import length_factor, scaled_points, warn_if_large
+
 __all__ = ["SURFACE_EXTENSIONS", "SurfaceError", "contains_points", "load_surface", "winding_numbers"]
 
 logger = logging.getLogger(__name__)
@@ -44,7 +48,7 @@ def load_surface(source, *, name: str | None = None, units: str = "m", scale=Non
         The length unit of the coordinates; they are converted to metres.
     scale : float, optional
         A further factor on the coordinates; the factor to metres is ``UNITS[units] * scale``
-        (:func:`volspring.units.length_factor`).
+        (:func:`meshing.units.length_factor`).
 
     Returns
     -------
@@ -66,7 +70,7 @@ def load_surface(source, *, name: str | None = None, units: str = "m", scale=Non
     -----
     UserWarning
         When a file read in metres with no explicit ``scale`` is more than 10 m across: probably
-        millimetres (:func:`volspring.units.warn_if_large`). In-memory meshes are not warned about.
+        millimetres (:func:`meshing.units.warn_if_large`). In-memory meshes are not warned about.
 
     Examples
     --------
@@ -76,8 +80,6 @@ def load_surface(source, *, name: str | None = None, units: str = "m", scale=Non
     (True, 320)
     """
     import trimesh
-
-    from volspring.units import length_factor, scaled_points, warn_if_large
 
     factor = length_factor(units, scale)
     if isinstance(source, trimesh.Trimesh):
@@ -125,8 +127,6 @@ def _read(path: Path, name: str):
 
 
 def _check_finite(mesh, name):
-    from volspring.mesh import LARGEST_COORDINATE
-
     if len(mesh.faces) == 0:
         raise SurfaceError(f"{name}: the surface has no triangles")
     bad = ~np.isfinite(mesh.vertices).all(axis=1)
@@ -237,9 +237,9 @@ def _check_self_intersection(mesh, name):
     - Between two bodies (connected parts), exact contacts decided by nudging: boxes offset by half their
       size cross only on the diagonals that split their square sides, and overlapping boxes can share
       side planes, where no crossing is strict. Each body pair is tested again with one body moved by
-      :data:`_NUDGE` of the pair's size, along each of :data:`_NUDGE_DIRECTIONS` and their opposites. An
-      overlap of some volume survives every such move; bodies that only touch (a side lying against a
-      side) come apart under at least one, and pass.
+      :data:`~meshing.tolerances.CONTACT_NUDGE` of the pair's size, along each of :data:`_NUDGE_DIRECTIONS`
+      and their opposites. An overlap of some volume survives every such move; bodies that only touch (a side
+      lying against a side) come apart under at least one, and pass.
     """
     tri = mesh.triangles
     low, high = tri.min(axis=1), tri.max(axis=1)
@@ -288,7 +288,7 @@ def _check_self_intersection(mesh, name):
         size = np.ptp(np.concatenate([first_tri[between], second_tri[between]], axis=1), axis=1).max(axis=1)
         overlapping, first_move = np.unique(body_pair), None
         for direction in np.concatenate([_NUDGE_DIRECTIONS, -_NUDGE_DIRECTIONS]):  # six moves, not a loop over faces
-            step = (_NUDGE * sign * size)[:, None, None] * direction
+            step = (CONTACT_NUDGE * sign * size)[:, None, None] * direction
             crossing = _faces_cross(first_tri[between] + step, second_tri[between])
             overlapping = np.intersect1d(overlapping, body_pair[crossing])
             first_move = crossing if first_move is None else first_move
@@ -299,14 +299,8 @@ def _check_self_intersection(mesh, name):
                            f"{first[0]} and {first[1]} near {tri[first[0]].mean(axis=0).tolist()}")
 
 
-#: Four points whose signed volume is at most this times the cube of the pair's extent count as coplanar:
-#: the determinant's round-off is ~1e-16 of that cube, so 1e-12 leaves four orders of margin.
-_COPLANAR = 1e-12
-#: How far bodies are moved, relative to the size of a pair of faces, to decide exact contacts: far above
-#: the coplanar tolerance (1e-6 l moves a signed volume by ~1e-6 l^3 >> 1e-12 l^3), far below any feature
-#: a surface meant for meshing has.
-_NUDGE = 1e-6
-#: The directions of those moves: three fixed generic ones (the rows of a rotation parallel to no axis or
+#: The directions of the moves that decide exact contacts (their size is meshing.tolerances.CONTACT_NUDGE):
+#: three fixed generic ones (the rows of a rotation parallel to no axis or
 #: diagonal of a hand-made surface), each also taken the other way round.
 _NUDGE_DIRECTIONS = np.linalg.qr(np.array([[0.9134, 0.2331, -0.3337], [-0.1822, 0.9614, 0.2061],
                                            [0.3627, -0.1438, 0.9207]]))[0]
@@ -323,11 +317,6 @@ def _body_labels(mesh) -> np.ndarray:
     return connected_components(graph, directed=False)[1]
 
 
-def _signed_volumes(a, b, c, d):
-    """(p,) float -- det[b - a, c - a, d - a]: positive when d lies on the side of plane abc its normal points to."""
-    return np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a))
-
-
 def _faces_cross(first, second):
     """(p,) bool -- whether an edge of either triangle of each pair passes strictly through the other."""
     return _edges_cross(first, second) | _edges_cross(second, first)
@@ -337,19 +326,19 @@ def _edges_cross(edge_triangles, triangles):
     """(p,) bool -- whether an edge of ``edge_triangles[i]`` passes strictly through ``triangles[i]``.
 
     Strictly: its ends lie on opposite sides of the triangle's plane and the line through it passes
-    each edge of the triangle on the same turning side, all with signed volumes beyond
-    :data:`_COPLANAR` of zero. An edge that touches the plane with an end, lies in it, or meets the
+    each edge of the triangle on the same turning side, all with signed volumes beyond the flat-tet
+    rule (:data:`meshing.tolerances.ZERO_VOLUME`): four points are coplanar when the tet they span is flat. An edge that touches the plane with an end, lies in it, or meets the
     triangle exactly on its boundary does not count here (see :func:`_check_self_intersection`).
     """
     a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
     corners = np.concatenate([edge_triangles, triangles], axis=1)
-    tolerance = _COPLANAR * np.ptp(corners, axis=1).max(axis=1) ** 3
+    tolerance = ZERO_VOLUME * np.ptp(corners, axis=1).max(axis=1) ** 3
     hit = np.zeros(len(triangles), dtype=bool)
     for start, end in ((0, 1), (1, 2), (2, 0)):  # the three edges, not a loop over faces
         p, q = edge_triangles[:, start], edge_triangles[:, end]
-        side_p, side_q = _signed_volumes(a, b, c, p), _signed_volumes(a, b, c, q)
+        side_p, side_q = signed_volumes(a, b, c, p), signed_volumes(a, b, c, q)
         through_plane = ((side_p > tolerance) & (side_q < -tolerance)) | ((side_p < -tolerance) & (side_q > tolerance))
-        turns = np.stack([_signed_volumes(p, q, a, b), _signed_volumes(p, q, b, c), _signed_volumes(p, q, c, a)])
+        turns = np.stack([signed_volumes(p, q, a, b), signed_volumes(p, q, b, c), signed_volumes(p, q, c, a)])
         inside = (turns > tolerance).all(axis=0) | (turns < -tolerance).all(axis=0)
         hit |= through_plane & inside
     return hit

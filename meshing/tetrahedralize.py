@@ -1,6 +1,6 @@
 """Closed surfaces to tetrahedral meshes: gmsh (quality meshing) or Delaunay of Steiner points (the seed's method).
 
-Both backends return a :class:`volspring.TetMesh` with positively oriented tets and no unused nodes.
+Both backends return a :class:`meshing.TetMesh` with positively oriented tets and no unused nodes.
 """
 
 from __future__ import annotations
@@ -11,7 +11,9 @@ import os
 
 import numpy as np
 
-from volspring.mesh import TET_FACES, ZERO_VOLUME, TetMesh, signed_tet_volumes
+from meshing.geometry import signed_tet_volumes
+from meshing.mesh import TET_FACES, TetMesh
+from meshing.tolerances import SAME_PLANE_COSINE, ZERO_VOLUME
 
 __all__ = ["MAX_TETS", "METHODS", "TETS_PER_CUBIC_SIZE", "estimated_tet_count", "tetrahedralize"]
 
@@ -266,10 +268,10 @@ def _slid_along_surface(surface, movable, rng):
     # The incident normal least parallel to the first one: a crease's second plane.
     other = normals[np.arange(len(normals)), np.nanargmin(np.where(np.isnan(along_first), np.inf, along_first), axis=1)]
     along_other = np.abs(np.einsum("nkj,nj->nk", normals, other))
-    tol = 1e-9  # normals of one flat facet agree to round-off
+    same_plane = 1 - SAME_PLANE_COSINE  # normals of one flat facet agree to round-off
     padding = np.isnan(along_first)
-    flat = ((along_first > 1 - tol) | padding).all(axis=1)
-    crease = ~flat & ((along_first > 1 - tol) | (along_other > 1 - tol) | padding).all(axis=1)
+    flat = ((along_first > same_plane) | padding).all(axis=1)
+    crease = ~flat & ((along_first > same_plane) | (along_other > same_plane) | padding).all(axis=1)
     direction = rng.normal(size=(len(first), 3))
     direction[flat] -= np.einsum("nj,nj->n", direction[flat], first[flat])[:, None] * first[flat]
     line = np.cross(first[crease], other[crease])

@@ -4,8 +4,7 @@ from pathlib import Path
 
 import pytest
 
-from meshing import structured_box
-from volspring import TetMesh
+from meshing import TetMesh, structured_box
 
 # Copies of ../shared/data that travel with the repository, so that a clone with nothing beside it passes.
 SHARED_DATA = Path(__file__).resolve().parent / "data"

@@ -11,7 +11,7 @@ from scipy.spatial import Delaunay
 
 import meshing.anchoring as anchor_module
 from meshing.anchoring import Anchor, anchor
-from volspring import TetMesh
+from meshing import TetMesh
 
 # Tolerances. 1e-10 is the acceptance figure of issue 2 for rest and affine reproduction; the measured errors are
 # round-off, 1e-13 or below on these meshes (coordinates up to about 160, weights down to about -10).

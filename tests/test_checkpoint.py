@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from volspring import Gravity, Material, Pins, Scene, SpringModel, State, simulate
+from volspring import Gravity, Material, Pins, Scene, Model, State, simulate
 from volspring.checkpoint import load_checkpoint, save_checkpoint
 from volspring.integrators import make_integrator
 from volspring.integrators.base import Integrator
@@ -139,9 +139,9 @@ class Leapfrog(Integrator):
 @pytest.fixture(scope="module")
 def beam_scene():
     mesh = cube_mesh((4, 1, 1), size=(0.4, 0.1, 0.1))
-    model = SpringModel.from_mesh(mesh, Material(E=1e5, nu=0.3, density=1000.0), damping_ratio=0.02)
+    model = Model.from_mesh(mesh, Material(E=1e5, nu=0.3, density=1000.0), damping_ratio=0.02)
     clamped = np.flatnonzero(mesh.points[:, 0] == 0.0)
-    return Scene(model, forces=[Gravity(model.masses)], pins=Pins(clamped))
+    return Scene(model, forces=[Gravity()], pins=Pins(clamped))
 
 
 def make(name):
@@ -200,9 +200,9 @@ def test_a_simulation_resumed_from_its_checkpoint_is_bit_identical(tmp_path, bea
 
 
 def _run_scene(E=1e6, pins=True):
-    model = SpringModel.from_mesh(cube_mesh((3, 1, 1), (0.3, 0.1, 0.1)), Material(E, 0.3, 1000.0), damping_ratio=0.05)
+    model = Model.from_mesh(cube_mesh((3, 1, 1), (0.3, 0.1, 0.1)), Material(E, 0.3, 1000.0), damping_ratio=0.05)
     held = Pins(np.flatnonzero(model.rest_positions[:, 0] < 1e-9)) if pins else None
-    return Scene(model, forces=[Gravity(model.masses)], pins=held)
+    return Scene(model, forces=[Gravity()], pins=held)
 
 
 def test_a_checkpoint_refuses_another_run_naming_what_differs(tmp_path):

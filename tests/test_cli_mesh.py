@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from meshing.cli import main
-from volspring import TetMesh
+from meshing import TetMesh
 
 
 @pytest.mark.parametrize("suffix", [".vtu", ".msh", ".mesh"])

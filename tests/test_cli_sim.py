@@ -234,11 +234,11 @@ def test_solver_knobs_refuse_nonsense(capsys, beam_file, argv, message):
 
 
 def test_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, beam_file, monkeypatch):
-    import volspring.cli
+    import volspring.cli._build
 
     target = tmp_path / "taken.txt"
     target.write_text("not a folder")
-    monkeypatch.setattr(volspring.cli, "_load_mesh", lambda args: pytest.fail("meshed before checking --out"))
+    monkeypatch.setattr(volspring.cli._build, "load_mesh", lambda args: pytest.fail("meshed before checking --out"))
     status, _, err = run(capsys, beam_file, "--out", target)
     assert status == 1 and f"--out {target} is an existing file, expected a folder" in err
     status, _, err = run(capsys, beam_file, "--out", target / "below")

@@ -7,10 +7,11 @@ import time
 
 import pytest
 
-import validation.report
+import validation.report.html
+import validation.report.runner
 from conftest import signal_when_ready
 from validation.cli import main
-from volspring._io import is_temporary_name
+from meshing._io import is_temporary_name
 from volspring.output import read_manifest
 
 # The cheapest real run: the Cauchy study alone (about 2 s), which writes results.json and report.html.
@@ -23,7 +24,7 @@ def no_work(monkeypatch):
     def run_validation(**kwargs):
         raise AssertionError("the validation ran before the bad input was reported")
 
-    monkeypatch.setattr(validation.report, "run_validation", run_validation)
+    monkeypatch.setattr(validation.report.runner, "run_validation", run_validation)
 
 
 @pytest.fixture
@@ -137,7 +138,7 @@ def test_an_interruption_while_computing(stop, status, name, tmp_path, cache, ca
         time.sleep(5)
         raise AssertionError("SIGTERM did not stop the run")
 
-    monkeypatch.setattr(validation.report, "run_validation", run_validation)
+    monkeypatch.setattr(validation.report.runner, "run_validation", run_validation)
     before = signal.getsignal(signal.SIGTERM)
     out = tmp_path / "out"
     assert main(CAUCHY + ["--out", str(out), "--cache", cache]) == status
@@ -148,14 +149,14 @@ def test_an_interruption_while_computing(stop, status, name, tmp_path, cache, ca
 
 
 def test_sigterm_while_writing_leaves_complete_listed_files_only(tmp_path, cache, capsys, monkeypatch):
-    real_html = validation.report._html
+    real_html = validation.report.html.render_html
 
     def html_then_sigterm(results, figures):
         text = real_html(results, figures)
         os.kill(os.getpid(), signal.SIGTERM)  # inside atomic_path, while report.html is a temporary file
         return text
 
-    monkeypatch.setattr(validation.report, "_html", html_then_sigterm)
+    monkeypatch.setattr(validation.report.html, "render_html", html_then_sigterm)
     out = tmp_path / "out"
     assert main(CAUCHY + ["--out", str(out), "--cache", cache]) == 143
     assert one_error_line(capsys) == (

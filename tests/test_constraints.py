@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from volspring import Gravity, Material, Pins, Scene, SpringModel
+from volspring import Gravity, Material, Pins, Scene, Model
 from volspring.constraints import DistanceConstraints, HalfSpace, StrainLimit, constraint_colors
-from volspring.fields import CallableForce
+from volspring.forces import CallableForce
 from volspring.integrators import make_integrator
 from volspring.springs import spring_strains
 from volspring.stability import omega_max_bound
@@ -25,7 +25,7 @@ def stable_step(model, fraction=0.5):
 def rope(links, *, length=1.0, stiffness=0.0, mass=0.05, direction=(1.0, 0.0, 0.0)):
     points = np.outer(np.linspace(0.0, length, links + 1), direction)
     springs = np.stack([np.arange(links), np.arange(1, links + 1)], axis=1)
-    return SpringModel.from_arrays(points, np.full(links + 1, mass), springs, stiffness=stiffness)
+    return Model.from_arrays(points, np.full(links + 1, mass), springs, stiffness=stiffness)
 
 
 # ---------------------------------------------------------------------------- half-space
@@ -47,9 +47,9 @@ def test_half_space_contact_velocity_rules():
 @pytest.mark.parametrize("name", ["symplectic_euler", "verlet"])
 @pytest.mark.parametrize("normal", [(0.0, 0.0, 1.0), (0.3, -0.2, 1.0)], ids=["level", "tilted"])
 def test_a_dropped_body_never_goes_below_the_plane(name, normal):
-    model = SpringModel.from_mesh(cube_mesh((2, 2, 2), size=(0.1, 0.1, 0.1)), RUBBER, damping_ratio=0.05)
+    model = Model.from_mesh(cube_mesh((2, 2, 2), size=(0.1, 0.1, 0.1)), RUBBER, damping_ratio=0.05)
     plane = HalfSpace((0.0, 0.0, -0.05), normal, restitution=0.3, friction=0.4)
-    scene = Scene(model, forces=[Gravity(model.masses)], obstacles=[plane])
+    scene = Scene(model, forces=[Gravity()], obstacles=[plane])
     stepper, dt = make_integrator(name), stable_step(model)
     state = scene.initial_state()
     lowest = []
@@ -70,8 +70,8 @@ def test_coulomb_friction_on_a_tilted_plane_for_one_particle(ratio):
     theta = np.arctan(ratio * mu)
     normal = np.array([-np.sin(theta), 0.0, np.cos(theta)])
     downhill = -np.array([np.cos(theta), 0.0, np.sin(theta)])  # the tangent along which g . t < 0
-    particle = SpringModel.from_arrays([[0.0, 0.0, 0.0]], [2.0], np.zeros((0, 2), dtype=int), stiffness=1.0)
-    scene = Scene(particle, forces=[Gravity(particle.masses)], obstacles=[HalfSpace((0, 0, 0), normal, friction=mu)])
+    particle = Model.from_arrays([[0.0, 0.0, 0.0]], [2.0], np.zeros((0, 2), dtype=int), stiffness=1.0)
+    scene = Scene(particle, forces=[Gravity()], obstacles=[HalfSpace((0, 0, 0), normal, friction=mu)])
     dt, steps = 1e-3, 400
     state = scene.initial_state()
     stepper = make_integrator("symplectic_euler")  # the exact discrete prediction below is symplectic Euler's
@@ -98,7 +98,7 @@ def test_a_block_slides_iff_tan_angle_exceeds_mu(name, ratio):
     """
     mu = 0.5
     theta = np.arctan(ratio * mu)
-    model = SpringModel.from_mesh(cube_mesh((2, 2, 2), size=(0.1, 0.1, 0.1)), RUBBER, damping_ratio=0.3)
+    model = Model.from_mesh(cube_mesh((2, 2, 2), size=(0.1, 0.1, 0.1)), RUBBER, damping_ratio=0.3)
     m = model.masses[:, None]
 
     def tilting_gravity(x, v, t):
@@ -134,7 +134,7 @@ def test_a_block_slides_iff_tan_angle_exceeds_mu(name, ratio):
 
 # ---------------------------------------------------------------------------- colouring
 @pytest.mark.parametrize("pairs", [
-    SpringModel.from_mesh(cube_mesh((3, 3, 3)), RUBBER).springs,
+    Model.from_mesh(cube_mesh((3, 3, 3)), RUBBER).springs,
     np.random.default_rng(0).integers(0, 40, (300, 2)),
 ], ids=["cube", "random"])
 def test_colouring_separates_constraints_that_share_a_node(pairs):
@@ -153,7 +153,7 @@ def test_colouring_separates_constraints_that_share_a_node(pairs):
 # ---------------------------------------------------------------------------- distance constraints
 @pytest.fixture(scope="module")
 def jelly():
-    model = SpringModel.from_mesh(cube_mesh((3, 3, 3), size=(0.3, 0.3, 0.3)), RUBBER)
+    model = Model.from_mesh(cube_mesh((3, 3, 3), size=(0.3, 0.3, 0.3)), RUBBER)
     shaken = model.rest_positions + 0.01 * np.random.default_rng(1).standard_normal(model.rest_positions.shape)
     return model, shaken
 
@@ -220,7 +220,7 @@ def test_pinned_endpoints_do_not_move(jelly):
 def test_a_rope_pinned_at_one_end_keeps_its_lengths(name):
     model = rope(10)  # 1 m, 11 beads of 50 g, no springs: the constraints are the rope
     constraints = DistanceConstraints.from_model(model, iterations=10)
-    scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins([0]), constraints=[constraints])
+    scene = Scene(model, forces=[Gravity()], pins=Pins([0]), constraints=[constraints])
     stepper, dt = make_integrator(name), 1e-3
     state = scene.initial_state()
     worst = 0.0
@@ -257,7 +257,7 @@ def test_strain_limit_holds_a_soft_hanging_rope_at_one_plus_tau(name):
     limit = StrainLimit(model, tau, iterations=300, tolerance=tolerance)
     results = {}
     for label, constraints in (("free", []), ("limited", [limit])):
-        scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins([0]), constraints=constraints)
+        scene = Scene(model, forces=[Gravity()], pins=Pins([0]), constraints=constraints)
         state, worst = scene.initial_state(), 0.0
         for _ in range(int(0.5 / dt)):
             state = stepper.step(scene, state, dt)

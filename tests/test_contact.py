@@ -1,4 +1,4 @@
-"""Penalty contact response: assembly of several bodies, momentum, Jacobians, settling, stiffness, friction."""
+"""Penalty contact response: several bodies in one Model, momentum, Jacobians, settling, stiffness, friction."""
 
 import importlib.util
 import math
@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from conftest import cube_mesh
-from volspring import Gravity, Material, Pins, Scene
+from volspring import Gravity, Material, Model, Pins, Scene
 from volspring import HalfSpace
-from volspring.collision import StaticTriangleMesh
+from volspring.bodies import Body, initial_velocities
+from volspring.collision import CollisionBodies, StaticTriangleMesh
 from volspring.collision.contact import ContactForce, ObstacleContactForce
-from volspring.collision.multibody import Body, assemble_bodies
 from volspring.diagnostics import linear_momentum
 from volspring.integrators import INTEGRATORS, make_integrator
 from volspring.output.paraview import read_pvd
@@ -41,91 +41,168 @@ class WithoutJacobian:
     def __init__(self, force):
         self.force = force
 
-    def accumulate(self, x, v, t, out):
-        self.force.accumulate(x, v, t, out)
+    def accumulate(self, model, x, v, t, out):
+        self.force.accumulate(model, x, v, t, out)
 
-    def potential_energy(self, x, t):
-        return self.force.potential_energy(x, t)
+    def potential_energy(self, model, x, t):
+        return self.force.potential_energy(model, x, t)
+
+
+def colliding_bodies(*, speed=0.5, damping_ratio=0.1):
+    """Two 0.1 m cubes (3 x 3 x 3 cells) 2 mm apart, offset sideways, flying into each other: the Bodies."""
+    mesh = cube_mesh((3, 3, 3), (0.1, 0.1, 0.1))
+    return [Body(mesh, SOFT, velocity=(speed, 0, 0), damping_ratio=damping_ratio),
+            Body(mesh, SOFT, translation=(0.102, 0.02, 0.01), velocity=(-speed, 0, 0), damping_ratio=damping_ratio)]
 
 
 def colliding_cubes(*, speed=0.5, damping_ratio=0.1, **contact_options):
-    """Two 0.1 m cubes (3 x 3 x 3 cells) 2 mm apart, offset sideways, flying into each other."""
-    mesh = cube_mesh((3, 3, 3), (0.1, 0.1, 0.1))
-    system = assemble_bodies([
-        Body(mesh, SOFT, velocity=(speed, 0, 0), damping_ratio=damping_ratio),
-        Body(mesh, SOFT, translation=(0.102, 0.02, 0.01), velocity=(-speed, 0, 0), damping_ratio=damping_ratio)])
-    return system, ContactForce(system, **contact_options)
+    """The colliding cubes as ``(model, initial velocities (n, 3), ContactForce)``."""
+    bodies = colliding_bodies(speed=speed, damping_ratio=damping_ratio)
+    model = Model.from_bodies(bodies)
+    return model, initial_velocities(bodies, model), ContactForce(model, **contact_options)
 
 
 # ---------------------------------------------------------------------- assembly
-def test_assemble_bodies_numbers_mesh_nodes_first_and_places_bodies():
+def test_from_bodies_numbers_mesh_nodes_first_and_places_bodies():
     from meshing.shells import add_shells
     from scipy.spatial.transform import Rotation
 
     mesh = cube_mesh((2, 2, 2), (0.1, 0.1, 0.1))
     shelled = add_shells(mesh, layers=1, thickness=0.01)
     rotation = Rotation.from_rotvec([0.3, -0.2, 0.5])
-    system = assemble_bodies([
-        Body(shelled, SOFT, velocity=(1.0, 0, 0), angular_velocity=(0, 0, 5.0)),
-        Body(mesh, SOFT, rotation=rotation, translation=(0.5, 0, 0))])
-    model = system.model
+    bodies = [Body(shelled, SOFT, velocity=(1.0, 0, 0), angular_velocity=(0, 0, 5.0)),
+              Body(mesh, SOFT, rotation=rotation, translation=(0.5, 0, 0))]
+    model = Model.from_bodies(bodies)
     # Mesh nodes of both bodies first (the collision numbering), then the shell nodes of body 0.
-    assert system.mesh_nodes[0].tolist() == list(range(27))
-    assert system.mesh_nodes[1].tolist() == list(range(27, 54))
-    assert system.shell_nodes[0].tolist() == list(range(54, model.node_count))
-    assert system.collision_nodes.tolist() == list(range(54))
-    np.testing.assert_array_equal(model.rest_positions[system.mesh_nodes[1]],
-                                  rotation.apply(np.array(mesh.points)) + [0.5, 0, 0])
-    np.testing.assert_array_equal(model.rest_positions[system.body_nodes(0)], shelled.points)
+    shells = list(range(54, model.node_count))
+    assert model.node_body.tolist() == [0] * 27 + [1] * 27 + [0] * len(shells)
+    assert model.body_nodes(0).tolist() == list(range(27)) + shells
+    assert model.body_nodes(1).tolist() == list(range(27, 54))
+    assert CollisionBodies.from_model(model).model_nodes.tolist() == list(range(54))
+    np.testing.assert_array_equal(model.rest_positions[27:54], rotation.apply(np.array(mesh.points)) + [0.5, 0, 0])
+    np.testing.assert_array_equal(model.rest_positions[model.body_nodes(0)], shelled.points)
     # Masses and springs of each body are those of its own model (rigid motions change neither).
-    alone = [model.__class__.from_mesh(shelled, SOFT), model.__class__.from_mesh(mesh, SOFT)]
+    alone = [Model.from_mesh(shelled, SOFT), Model.from_mesh(mesh, SOFT)]
     for body, single in enumerate(alone):
-        assert system.body_masses[body] == pytest.approx(single.total_mass, rel=1e-14)  # sums in another order
+        assert model.body_masses[body] == pytest.approx(single.total_mass, rel=1e-14)  # sums in another order
     assert model.spring_count == sum(single.spring_count for single in alone)
     # Rest lengths are measured on the placed nodes: the assembled rest state has no spring force.
     assert np.abs(Scene(model).forces_at(model.rest_positions, np.zeros_like(model.rest_positions), 0.0)).max() == 0
     # The spin adds no linear momentum: p = M v of body 0 exactly, up to round-off.
-    momentum = model.masses @ system.initial_velocities
-    assert momentum == pytest.approx([system.body_masses[0], 0, 0], abs=1e-15)
+    momentum = model.masses @ initial_velocities(bodies, model)
+    assert momentum == pytest.approx([model.body_masses[0], 0, 0], abs=1e-15)
     assert model.topology.mesh.node_count == 54 and model.topology.shell_node_count == model.node_count - 54
 
 
-def test_assemble_bodies_rejects_bad_input():
+def test_from_bodies_rejects_bad_input():
     mesh = cube_mesh()
     with pytest.raises(ValueError, match="not a proper rotation"):
-        assemble_bodies([Body(mesh, SOFT, rotation=np.diag([1.0, 1.0, -1.0]))])
+        Model.from_bodies([Body(mesh, SOFT, rotation=np.diag([1.0, 1.0, -1.0]))])
     with pytest.raises(ValueError, match="translation"):
-        assemble_bodies([Body(mesh, SOFT, translation=(0, 1))])
+        Model.from_bodies([Body(mesh, SOFT, translation=(0, 1))])
+    with pytest.raises(ValueError, match=r"bodies\[0\]\.velocity = \(1, 2\)"):
+        Model.from_bodies([Body(mesh, SOFT, velocity=(1, 2))])
     with pytest.raises(ValueError, match="at least one Body"):
-        assemble_bodies([])
+        Model.from_bodies([])
     with pytest.raises(TypeError, match="bodies\\[0\\]"):
-        assemble_bodies([mesh])
+        Model.from_bodies([mesh])
+
+
+def test_assemble_bodies_still_works_with_a_warning_and_gives_the_same_contact():
+    """The old path (until 0.3.0): assemble_bodies warns, wraps Model.from_bodies, and contact on it is
+    contact on the model, bit for bit; both match contact rebuilt by hand from the placed meshes."""
+    from meshing import TetMesh
+    from volspring.collision import consistent_penetration_depths, detect_collisions
+    from volspring.collision.multibody import MultiBodyModel, assemble_bodies
+
+    with pytest.warns(DeprecationWarning, match=r"multibody\.Body is deprecated.*use volspring\.bodies\.Body"):
+        from volspring.collision.multibody import Body as OldBody
+    with pytest.warns(DeprecationWarning, match=r"collision\.assemble_bodies is deprecated.*Model\.from_bodies"):
+        from volspring.collision import assemble_bodies as package_assemble_bodies
+    assert OldBody is Body and package_assemble_bodies is assemble_bodies
+    hard = Material(E=4e5, nu=0.3, density=2000.0)
+    mesh = cube_mesh((3, 3, 3), (0.1, 0.1, 0.1))
+    bodies = [Body(mesh, SOFT, velocity=(0.5, 0, 0), damping_ratio=0.1),
+              Body(mesh, hard, translation=(0.09, 0.02, 0.01), velocity=(-0.5, 0, 0), angular_velocity=(0, 1, 0))]
+    with pytest.warns(DeprecationWarning, match=r"assemble_bodies is deprecated.*use volspring\.Model\.from_bodies"):
+        system = assemble_bodies(bodies)
+    model = Model.from_bodies(bodies)
+    assert isinstance(system, MultiBodyModel) and system.bodies == tuple(bodies)
+    for name in ("rest_positions", "masses", "springs", "stiffness", "damping", "node_body"):
+        np.testing.assert_array_equal(getattr(system.model, name), getattr(model, name))
+    np.testing.assert_array_equal(system.node_body, model.node_body)
+    np.testing.assert_array_equal(system.initial_velocities, initial_velocities(bodies, model))
+    assert [nodes.tolist() for nodes in system.mesh_nodes] == [list(range(64)), list(range(64, 128))]
+    assert [nodes.size for nodes in system.shell_nodes] == [0, 0]
+    assert system.collision_nodes.tolist() == list(range(128))
+    assert system.youngs_modulus.tolist() == [SOFT.E, hard.E]
+    np.testing.assert_array_equal(system.body_masses, model.body_masses)
+    # The old path's own construction, redone by hand: the placed meshes, E per body, their mean edge lengths.
+    placed = [TetMesh(model.rest_positions[:64], mesh.tets), TetMesh(model.rest_positions[64:], mesh.tets)]
+    np.testing.assert_array_equal(system.edge_length, [m.edge_lengths.mean() for m in placed])
+    old, new = ContactForce(system, friction=0.3), ContactForce(model, friction=0.3)
+    for ours, theirs in zip(new.bodies.meshes, placed):
+        np.testing.assert_array_equal(ours.points, theirs.points)
+        np.testing.assert_array_equal(ours.tets, theirs.tets)
+    E_eff = 2 * SOFT.E * hard.E / (SOFT.E + hard.E)
+    # k_c = alpha E_eff l of the penetrating vertex's body (alpha = 1): equal but for the order of products.
+    np.testing.assert_allclose(new.pair_stiffness[0, 1], E_eff * placed[0].edge_lengths.mean(), rtol=1e-15)
+    rng = np.random.default_rng(11)
+    x = model.rest_positions + rng.normal(scale=0.002, size=model.rest_positions.shape)
+    v = rng.normal(scale=0.1, size=x.shape)
+    hand = CollisionBodies(tuple(placed))
+    expected = consistent_penetration_depths(hand, x, detect_collisions(hand, x))
+    found = new.penetration_depths(x)
+    assert found.count > 10  # the cubes overlap by 1 cm: many contacts, in both directions
+    np.testing.assert_array_equal(found.vertex, expected.vertex)
+    np.testing.assert_array_equal(found.depth, expected.depth)
+    np.testing.assert_array_equal(forces(old, system.model, x, v), forces(new, model, x, v))
+    for a, b in zip(old.jacobian(system.model, x, v, 0.0), new.jacobian(model, x, v, 0.0)):
+        assert (a != b).nnz == 0
+    floor = [HalfSpace((0, 0, 0.02), (0, 0, 1))]
+    np.testing.assert_array_equal(forces(ObstacleContactForce(system, floor), system.model, x, v),
+                                  forces(ObstacleContactForce(model, floor), model, x, v))
+
+
+def test_obstacle_stiffness_follows_the_material_of_each_nodes_body():
+    hard = Material(E=4e5, nu=0.3, density=2000.0)
+    mesh = cube_mesh((2, 2, 2), (0.1, 0.1, 0.1))
+    model = Model.from_bodies([Body(mesh, SOFT), Body(mesh, hard, translation=(0.2, 0, 0))])
+    floor = ObstacleContactForce(model, [HalfSpace((0, 0, 0), (0, 0, 1))])
+    length = CollisionBodies.from_model(model).mean_edge_lengths
+    # k_c = alpha (2 E) l of the node's own body (a rigid obstacle), alpha = 1.
+    expected = np.where(model.node_body == 0, 2 * SOFT.E * length[0], 2 * hard.E * length[1])
+    np.testing.assert_allclose(floor.node_stiffness, expected, rtol=1e-15)  # one product each: exact to round-off
+    with pytest.raises(ValueError, match="no tet mesh to collide"):
+        ContactForce(Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0))
+    with pytest.raises(TypeError, match="expected a volspring.Model"):
+        ContactForce(mesh)
 
 
 def test_contact_options_are_checked():
-    system, _ = colliding_cubes()
+    model, _, _ = colliding_cubes()
     with pytest.raises(ValueError, match="friction = -0.1"):
-        ContactForce(system, friction=-0.1)
+        ContactForce(model, friction=-0.1)
     with pytest.raises(ValueError, match="not both"):
-        ContactForce(system, damping=1.0, damping_ratio=0.5)
+        ContactForce(model, damping=1.0, damping_ratio=0.5)
     with pytest.raises(ValueError, match="unknown depth method"):
-        ContactForce(system, method="nearest")
+        ContactForce(model, method="nearest")
     with pytest.raises(TypeError, match="obstacles\\[0\\]"):
-        ObstacleContactForce(system, [object()])
+        ObstacleContactForce(model, [object()])
 
 
 def test_self_collision_of_one_model_equals_two_bodies():
-    """One SpringModel whose mesh holds two disjoint cubes collides with itself like two bodies do."""
-    from volspring import SpringModel, TetMesh
+    """One Model whose mesh holds two disjoint cubes collides with itself like two bodies do."""
+    from meshing import TetMesh
 
-    system, two_bodies = colliding_cubes()
-    x = np.array(system.model.rest_positions)
-    x[system.mesh_nodes[1]] -= [0.012, 0, 0]  # 10 mm overlap
-    mesh = system.model.topology.mesh
-    single = SpringModel.from_mesh(TetMesh(x, mesh.tets), SOFT)
+    model, _, two_bodies = colliding_cubes()
+    x = np.array(model.rest_positions)
+    x[model.body_nodes(1)] -= [0.012, 0, 0]  # 10 mm overlap
+    mesh = model.topology.mesh
+    single = Model.from_mesh(TetMesh(x, mesh.tets), SOFT)
     itself = ContactForce(single, self_collision=True)
     v = np.random.default_rng(3).normal(scale=0.1, size=x.shape)
-    expected, found = forces(two_bodies, x, v), forces(itself, x, v)
+    expected, found = forces(two_bodies, model, x, v), forces(itself, single, x, v)
     assert two_bodies.contacts(x).count > 0
     # Same contacts, same stiffness (same material and edge lengths): equal to round-off.
     np.testing.assert_allclose(found, expected, rtol=0, atol=1e-12 * np.abs(expected).max())
@@ -141,22 +218,22 @@ MOMENTUM_STEPS = {name: 2e-4 for name in INTEGRATORS} | {"implicit_euler": 1e-3}
 
 @pytest.mark.parametrize("name", sorted(INTEGRATORS))
 def test_colliding_bodies_conserve_linear_momentum(name):
-    system, contact = colliding_cubes(speed=0.5)
-    scene = Scene(system.model, forces=[contact])
+    model, v0, contact = colliding_cubes(speed=0.5)
+    scene = Scene(model, forces=[contact])
     integrator = make_integrator(name, **({"solver": "direct"} if name == "implicit_euler" else {}))
     dt = MOMENTUM_STEPS[name]
-    state = scene.initial_state(v=system.initial_velocities)
+    state = scene.initial_state(v=v0)
     start = linear_momentum(scene, state)
-    body0 = system.mesh_nodes[0]
+    body0 = model.body_nodes(0)
     contacts = 0
     for _ in range(int(round(0.04 / dt))):
         state = integrator.step(scene, state, dt)
         contacts = max(contacts, contact.contacts(state.x).count)
-    scale = system.body_masses[0] * 0.5  # each body's momentum [kg m/s]
+    scale = model.body_masses[0] * 0.5  # each body's momentum [kg m/s]
     # The collision happened and moved momentum between the bodies (else the test proves nothing):
     # body 0 lost well over a tenth of its momentum.
     assert contacts > 0
-    assert system.model.masses[body0] @ state.v[body0, 0] < 0.9 * scale
+    assert model.masses[body0] @ state.v[body0, 0] < 0.9 * scale
     # Round-off: each step adds forces that cancel to ~1e-16 relative; the Verlet family's velocity
     # (x_{n+1} - x_n) / h divides position round-off by h. Measured: <= 1.5e-16 kg m/s for the
     # one-step schemes, 7e-14 for the Verlet family over 200 steps, against 0.5 kg m/s per body.
@@ -174,22 +251,23 @@ def small_block_on_big_block(**contact_options):
     """
     big = cube_mesh((4, 4, 2), (0.1, 0.1, 0.05))
     small = cube_mesh((1, 1, 1), (0.015, 0.015, 0.015))
-    system = assemble_bodies([Body(big, SOFT, damping_ratio=0.1),
-                              Body(small, SOFT, translation=(0.0291, 0.0313, 0.047))])
-    return system, ContactForce(system, **contact_options)
+    model = Model.from_bodies([Body(big, SOFT, damping_ratio=0.1),
+                               Body(small, SOFT, translation=(0.0291, 0.0313, 0.047))])
+    return model, ContactForce(model, **contact_options)
 
 
-def forces(force, x, v):
+def forces(force, model, x, v):
     out = np.zeros_like(x)
-    force.accumulate(x, v, 0.0, out)
+    force.accumulate(model, x, v, 0.0, out)
     return out
 
 
-def directional_derivative(force, x, v, dx=None, dv=None, step=1e-7):
+def directional_derivative(force, model, x, v, dx=None, dv=None, step=1e-7):
     """Central difference of the force along (dx, dv); step 1e-7 m is 3e-5 of the 3 mm depth."""
     dx = np.zeros_like(x) if dx is None else dx
     dv = np.zeros_like(v) if dv is None else dv
-    return (forces(force, x + step * dx, v + step * dv) - forces(force, x - step * dx, v - step * dv)) / (2 * step)
+    return (forces(force, model, x + step * dx, v + step * dv)
+            - forces(force, model, x - step * dx, v - step * dv)) / (2 * step)
 
 
 def reweighting(found, x, contact_forces, dx):
@@ -210,22 +288,22 @@ def reweighting(found, x, contact_forces, dx):
 
 def test_contact_jacobian_matches_finite_differences():
     rng = np.random.default_rng(5)
-    system, contact = small_block_on_big_block(friction=0.4)
-    x = np.array(system.model.rest_positions)
+    model, contact = small_block_on_big_block(friction=0.4)
+    x = np.array(model.rest_positions)
     found = contact.contacts(x)
     assert found.count == 4 and found.nodes.shape == (4, 5)  # the small cube's 4 bottom corners
-    small, big = system.mesh_nodes[1], system.mesh_nodes[0]
+    small, big = model.body_nodes(1), model.body_nodes(0)
     moves = [rng.normal(size=x.shape) * np.isin(np.arange(len(x)), small)[:, None],  # the small cube's nodes
              np.zeros_like(x), np.zeros_like(x)]
     moves[1][big] = rng.normal(size=3)  # a rigid move of the big block
     moves[2][small] = rng.normal(size=3)  # a rigid move of the small cube
     # Positions at v = 0 (dampers and friction then exert nothing whatever the weights).
     still = np.zeros_like(x)
-    dfdx, _ = contact.jacobian(x, still, 0.0)
-    on_vertex = forces(contact, x, still)[found.vertex]  # one contact per vertex here
+    dfdx, _ = contact.jacobian(model, x, still, 0.0)
+    on_vertex = forces(contact, model, x, still)[found.vertex]  # one contact per vertex here
     scale = found.stiffness.max()  # [N/m]: forces per metre of motion
     for dx in moves:
-        expected = directional_derivative(contact, x, still, dx=dx)
+        expected = directional_derivative(contact, model, x, still, dx=dx)
         linear = (dfdx @ dx.ravel()).reshape(-1, 3)
         omitted = reweighting(found, x, on_vertex, dx)
         # Exact but for the finite-difference error: O(step^2) and round-off 1e-16 F / step ~ 1e-11 k.
@@ -240,13 +318,13 @@ def test_contact_jacobian_matches_finite_differences():
     v = rng.normal(scale=0.05, size=x.shape)
     v[small, 2] = -0.05  # approaching: lambda > 0 with the damper, contacts sliding
     for options in ({"friction": 0.4, "damping": 0.0}, {"friction": 0.0}):
-        _, alone = small_block_on_big_block(**options)
+        alone_model, alone = small_block_on_big_block(**options)
         dv = rng.normal(size=x.shape)
-        _, jv = alone.jacobian(x, v, 0.0)
-        expected = directional_derivative(alone, x, v, dv=dv)
+        _, jv = alone.jacobian(alone_model, x, v, 0.0)
+        expected = directional_derivative(alone, alone_model, x, v, dv=dv)
         np.testing.assert_allclose((jv @ dv.ravel()).reshape(-1, 3), expected, atol=1e-6 * np.abs(expected).max())
     # Symmetric (CG needs it) and momentum-neutral: the forces of any perturbation sum to zero.
-    _, dfdv = contact.jacobian(x, v, 0.0)
+    _, dfdv = contact.jacobian(model, x, v, 0.0)
     for matrix in (dfdx, dfdv):
         assert abs(matrix - matrix.T).max() <= 1e-12 * abs(matrix).max()
         total = np.asarray((matrix @ rng.normal(size=3 * len(x))).reshape(-1, 3).sum(axis=0))
@@ -256,21 +334,21 @@ def test_contact_jacobian_matches_finite_differences():
 def test_obstacle_jacobian_matches_finite_differences():
     rng = np.random.default_rng(7)
     mesh = cube_mesh((2, 2, 2), (0.1, 0.1, 0.1))
-    system = assemble_bodies([Body(mesh, SOFT, translation=(0.003, 0.007, -0.021))])  # no node on the plane
+    model = Model.from_bodies([Body(mesh, SOFT, translation=(0.003, 0.007, -0.021))])  # no node on the plane
     slope = HalfSpace(point=(0, 0, 0), normal=(0.2, -0.1, 1.0))
-    floor = ObstacleContactForce(system, [slope], friction=0.5, damping=0.0)
-    x = np.array(system.model.rest_positions)
+    floor = ObstacleContactForce(model, [slope], friction=0.5, damping=0.0)
+    x = np.array(model.rest_positions)
     assert floor.contacts(x).count >= 5  # bottom nodes below the tilted plane (8 of 9)
     dx, dv = rng.normal(size=x.shape), rng.normal(size=x.shape)
     # A half-space's depth is linear in x: at v = 0 (no friction force) the central difference is
     # exact but for round-off; the tolerance is 1e-6 of the largest entry.
-    dfdx, _ = floor.jacobian(x, np.zeros_like(x), 0.0)
-    expected = directional_derivative(floor, x, np.zeros_like(x), dx=dx)
+    dfdx, _ = floor.jacobian(model, x, np.zeros_like(x), 0.0)
+    expected = directional_derivative(floor, model, x, np.zeros_like(x), dx=dx)
     np.testing.assert_allclose((dfdx @ dx.ravel()).reshape(-1, 3), expected, atol=1e-6 * np.abs(expected).max())
     # Friction is smooth in v (lambda does not depend on v without the damper): exact to O(step^2).
     v = rng.normal(scale=0.1, size=x.shape)
-    _, dfdv = floor.jacobian(x, v, 0.0)
-    expected = directional_derivative(floor, x, v, dv=dv)
+    _, dfdv = floor.jacobian(model, x, v, 0.0)
+    expected = directional_derivative(floor, model, x, v, dv=dv)
     np.testing.assert_allclose((dfdv @ dv.ravel()).reshape(-1, 3), expected, atol=1e-6 * np.abs(expected).max())
 
 
@@ -297,15 +375,15 @@ def test_cube_pushed_into_block_settles_shallow():
     """
     block = cube_mesh((4, 4, 2), (0.1, 0.1, 0.05))
     cube = cube_mesh((2, 2, 2), (0.04, 0.04, 0.04))
-    system = assemble_bodies([Body(block, SOFT, damping_ratio=0.3),
-                              Body(cube, SOFT, translation=(0.0312, 0.0291, 0.0505), damping_ratio=0.3)])
-    contact = ContactForce(system, friction=0.5)
-    model, edge = system.model, float(system.edge_length.min())
+    model = Model.from_bodies([Body(block, SOFT, damping_ratio=0.3),
+                               Body(cube, SOFT, translation=(0.0312, 0.0291, 0.0505), damping_ratio=0.3)])
+    contact = ContactForce(model, friction=0.5)
+    edge = float(contact.bodies.mean_edge_lengths.min())
     push = 0.1 * edge * contact.pair_stiffness.min()  # [N]: F / min k_c = 0.1 edge lengths
-    pushed = np.where(system.node_body == 1, model.masses, 0.0)
-    block_nodes = system.mesh_nodes[0]
+    pushed = np.where(model.node_body == 1, model.masses, 0.0)
+    block_nodes = model.body_nodes(0)
     bottom = block_nodes[model.rest_positions[block_nodes, 2] < 1e-9]
-    scene = Scene(model, forces=[Gravity(pushed, g=(0, 0, -push / system.body_masses[1])), contact],
+    scene = Scene(model, forces=[Gravity(masses=pushed, g=(0, 0, -push / model.body_masses[1])), contact],
                   pins=Pins(bottom))
     result, frames = run_frames(scene, make_integrator("implicit_euler", solver="direct"), scene.initial_state(),
                                 duration=0.5, dt=2e-3, frame_dt=0.05)
@@ -327,7 +405,7 @@ def test_ball_dropped_on_block_settles_shallow():
     """The example's scene on its quick meshes: a 50 mm ball dropped 10 mm onto a pinned block (mu = 0.5)."""
     example = load_example()
     setup = example.build(size=example.SETTINGS["quick"]["size"])
-    scene, system, contact = setup.scene, setup.system, setup.contact
+    scene, model, contact = setup.scene, setup.model, setup.contact
     result, frames = run_frames(scene, make_integrator("implicit_euler"), scene.initial_state(),
                                 duration=0.6, dt=5e-3, frame_dt=0.05)
     assert all(np.isfinite(frame.x).all() and np.isfinite(frame.v).all() for frame in frames)
@@ -335,19 +413,19 @@ def test_ball_dropped_on_block_settles_shallow():
     # that vertex W / k_c, the deepest any vertex can sit: with k_c = E l (alpha = 1, equal materials)
     # that is W / (E l^2) = 0.036 edge lengths for this ball (W = 4.4 N, l = 35 mm).
     bound = setup.ball_weight / contact.pair_stiffness.min()
-    assert bound < 0.04 * system.edge_length.min()
+    assert bound < 0.04 * contact.bodies.mean_edge_lengths.min()
     # From 0.4 s on the bounce is over (what moves is a slow rocking of the ball): measured depths
     # 0.018 to 0.028 edge lengths, the weight being shared by several contacts.
     for frame in frames[8:]:
         assert 0 < contact.contacts(frame.x).max_depth <= bound
     # Settled: the kinetic energy left at 0.6 s is below 5% of the impact's, (1/2) M v^2 with
     # v = sqrt(2 g gap) = 0.44 m/s (measured 2%: the rocking decays slowly through the springs' dampers).
-    ball = system.mesh_nodes[1]
-    impact = 0.5 * system.body_masses[1] * 2 * 9.81 * 0.01
+    ball = model.body_nodes(1)
+    impact = 0.5 * model.body_masses[1] * 2 * 9.81 * 0.01
     assert scene.kinetic_energy(frames[-1].v) < 0.05 * impact
     # On the block, not through it: the ball's centre of mass (radius 50 mm, block top at z = 0) rests
     # above half a radius (measured 43 mm: the soft block and ball give a little under the weight).
-    centre = system.model.masses[ball] @ frames[-1].x[ball, 2] / system.body_masses[1]
+    centre = model.masses[ball] @ frames[-1].x[ball, 2] / model.body_masses[1]
     assert centre > 0.025
     # Energy never rises between frames (measured: it falls by at least 2e-4 J per 0.05 s).
     assert np.diff(result.total_energy).max() <= 0.0
@@ -361,15 +439,15 @@ def test_implicit_euler_with_contact_jacobian_is_stable_far_beyond_the_explicit_
     that. With the Jacobian the collision ends with less energy than it started with; treating the
     same contact force explicitly inside the implicit step (its Jacobian hidden) pumps energy in.
     """
-    system, contact = colliding_cubes(speed=0.5, stiffness_factor=100.0)
+    model, v0, contact = colliding_cubes(speed=0.5, stiffness_factor=100.0)
     k_c = float(contact.pair_stiffness[0, 0])
-    reduced_mass = system.model.masses.min() / 2
+    reduced_mass = model.masses.min() / 2
     dt = 5e-3
     assert dt > 40 * 2 / math.sqrt(k_c / reduced_mass)
     outcomes = {}
     for label, force in (("with", contact), ("without", WithoutJacobian(contact))):
-        scene = Scene(system.model, forces=[force])
-        state = scene.initial_state(v=system.initial_velocities)
+        scene = Scene(model, forces=[force])
+        state = scene.initial_state(v=v0)
         start = total_energy(scene, state)
         integrator = make_integrator("implicit_euler", solver="direct")
         for _ in range(20):
@@ -392,11 +470,11 @@ def test_block_sliding_on_ground_decelerates_as_coulomb_predicts():
     """
     mu = 0.3
     mesh = cube_mesh((3, 3, 3), (0.1, 0.1, 0.05))
-    system = assemble_bodies([Body(mesh, SOFT, velocity=(1.0, 0, 0), damping_ratio=0.1)])
-    floor = ObstacleContactForce(system, [HalfSpace((0, 0, 0), (0, 0, 1))], friction=mu)
-    model = system.model
-    scene = Scene(model, forces=[Gravity(model.masses), floor])
-    state = scene.initial_state(v=system.initial_velocities)
+    bodies = [Body(mesh, SOFT, velocity=(1.0, 0, 0), damping_ratio=0.1)]
+    model = Model.from_bodies(bodies)
+    floor = ObstacleContactForce(model, [HalfSpace((0, 0, 0), (0, 0, 1))], friction=mu)
+    scene = Scene(model, forces=[Gravity(), floor])
+    state = scene.initial_state(v=initial_velocities(bodies, model))
     integrator = make_integrator("implicit_euler", solver="direct")
     times, speeds = [], []
     while state.t < 0.5 - 1e-9:
@@ -422,14 +500,14 @@ def test_block_rests_on_a_static_triangle_mesh():
     slab.apply_translation((0, 0, -0.025))
     obstacle = StaticTriangleMesh.from_trimesh(slab)
     mesh = cube_mesh((2, 2, 2), (0.06, 0.06, 0.06))
-    system = assemble_bodies([Body(mesh, SOFT, translation=(-0.03, -0.03, 0.005), damping_ratio=0.2)])
-    model = system.model
-    floor = ObstacleContactForce(system, [obstacle])
-    scene = Scene(model, forces=[Gravity(model.masses), floor])
+    model = Model.from_bodies([Body(mesh, SOFT, translation=(-0.03, -0.03, 0.005), damping_ratio=0.2)])
+    floor = ObstacleContactForce(model, [obstacle])
+    scene = Scene(model, forces=[Gravity(), floor])
     result, frames = run_frames(scene, make_integrator("implicit_euler", solver="direct"), scene.initial_state(),
                                 duration=0.4, dt=5e-3, frame_dt=0.05)
     # All the weight on one contact sinks it W / k_c with k_c = alpha (2 E) l (rigid obstacle): the bound.
-    bound = system.body_masses[0] * 9.81 / (2 * SOFT.E * system.edge_length[0])
+    edge = CollisionBodies.from_model(model).mean_edge_lengths[0]
+    bound = model.body_masses[0] * 9.81 / (2 * SOFT.E * edge)
     depth = floor.contacts(frames[-1].x).max_depth
     assert 0 < depth <= bound  # measured: a quarter of the bound (9 bottom nodes share the weight)
     assert np.diff(result.total_energy).max() <= 1e-9 * np.abs(result.total_energy).max()

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import meshing
-from volspring import Gravity, Material, Pins, Scene, SimulationDiverged, SpringModel
+from volspring import Gravity, Material, Pins, Scene, SimulationDiverged, Model
 from volspring.simulate import simulate
 from volspring.stability import critical_step, omega_max_estimate
 from volspring.statics import solve_static
@@ -27,9 +27,9 @@ def beam_mesh():
 
 
 def beam_scene(mesh, E, *, motion=None):
-    model = SpringModel.from_mesh(mesh, Material(E, 0.45, 1100.0), rule="van_gelder", damping_ratio=0.05)
+    model = Model.from_mesh(mesh, Material(E, 0.45, 1100.0), rule="van_gelder", damping_ratio=0.05)
     clamped = np.flatnonzero(mesh.points[:, 0] < -0.5 + 1e-9)
-    return Scene(model, forces=[Gravity(model.masses)], pins=Pins(clamped, motion=motion))
+    return Scene(model, forces=[Gravity()], pins=Pins(clamped, motion=motion))
 
 
 @pytest.mark.parametrize("E", MODULI)

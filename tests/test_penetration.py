@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from conftest import cube_mesh
-from volspring import TetMesh
+from meshing import TetMesh
 from volspring.collision import (
     PenetrationDepths,
     CollisionBodies,

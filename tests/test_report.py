@@ -8,9 +8,9 @@ import pytest
 from validation.cli import main
 from validation.compare import tip_deflection
 from validation.cases import cantilever_gravity
-from validation.fem import solve_static
+from validation.fem import solve_fem_static
 from validation.springs import spring_model, spring_static
-from volspring import TetMesh
+from meshing import TetMesh
 
 
 @pytest.fixture(scope="module")
@@ -52,7 +52,7 @@ def test_results_agree_with_a_direct_computation(quick_run):
     case = cantilever_gravity(per_height=1)  # the quick resolution
     reported = results["cases"]["cantilever_gravity"]
     assert reported["mesh"]["node_count"] == case.mesh.node_count
-    fem = solve_static(case.mesh, case.material_tuple, element="P2", **case.fem_arguments())
+    fem = solve_fem_static(case.mesh, case.material_tuple, element="P2", **case.fem_arguments())
     fem_tip = tip_deflection(case, fem.displacement)
     springs_tip = tip_deflection(case, spring_static(case, spring_model(case.mesh, case.material, "lloyd")).displacement)
     # Same inputs, same solvers: agreement to the solvers' tolerances (LU; Newton to 1e-7 of the load).
@@ -92,11 +92,11 @@ def test_log_axes_label_major_ticks_only():
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
 
-    from validation.report import _log_ticks
+    from validation.report.figures import log_ticks
 
     figure, axes = plt.subplots()
     axes.loglog([0.2, 0.9], [1e-6, 1e-2])  # x within one decade (the crowded case), y over four
-    _log_ticks(axes)
+    log_ticks(axes)
     for axis, limits in ((axes.xaxis, axes.get_xlim()), (axes.yaxis, axes.get_ylim())):
         assert isinstance(axis.get_minor_formatter(), NullFormatter)
         shown = [v for v in axis.get_major_locator()() if limits[0] <= v <= limits[1]]
@@ -163,3 +163,19 @@ def test_own_mesh_run(beam_file, tmp_path):
     assert set(own["springs"]) == {"van_gelder", "lloyd", "uniform"}
     assert np.isfinite(own["springs"]["van_gelder"]["tip_deflection_error"])
     assert (out / "vtu" / "own_mesh.vtu").is_file()
+
+
+def test_results_files_are_read_back_with_their_schema_checked(tmp_path):
+    from validation.report import SCHEMA, read_results
+
+    good = tmp_path / "results.json"
+    good.write_text(json.dumps({"schema": SCHEMA, "cases": {}}))
+    assert read_results(good)["cases"] == {}
+    newer = tmp_path / "newer.json"
+    newer.write_text(json.dumps({"schema": "volspring-validate/999"}))
+    with pytest.raises(ValueError, match=r"newer.json has schema 'volspring-validate/999'; this volspring reads"):
+        read_results(newer)
+    broken = tmp_path / "broken.json"
+    broken.write_text('{"schema": ')
+    with pytest.raises(ValueError, match=r"broken.json is not a readable validation results file"):
+        read_results(broken)

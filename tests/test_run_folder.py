@@ -15,9 +15,9 @@ import time
 import numpy as np
 import pytest
 
-import volspring._io
-from volspring import Material, SpringModel, State
-from volspring._io import atomic_path, is_temporary_name, remove_stale_temporaries
+import meshing._io
+from meshing._io import atomic_path, is_temporary_name, remove_stale_temporaries
+from volspring import Material, Model, State
 from volspring._signals import Terminated
 from volspring.output import (BlenderWriter, ParaViewWriter, RunFolder, RunFolderRefused, check_output_folder,
                               read_manifest, read_pvd)
@@ -31,7 +31,7 @@ FLAGS = {"overwrite": "--overwrite", "resume": "--resume CHECKPOINT"}
 
 @pytest.fixture(scope="module")
 def model():
-    return SpringModel.from_mesh(cube_mesh((2, 1, 1), size=(1.0, 0.5, 0.5)), Material(E=1e5, nu=0.3, density=1000.0))
+    return Model.from_mesh(cube_mesh((2, 1, 1), size=(1.0, 0.5, 0.5)), Material(E=1e5, nu=0.3, density=1000.0))
 
 
 def states(model, count, *, start=0):
@@ -248,7 +248,7 @@ def test_every_file_is_listed_before_it_appears(tmp_path, model, monkeypatch):
             renamed.append(os.path.basename(target))
         real_replace(source, target)
 
-    monkeypatch.setattr(volspring._io.os, "replace", checked_replace)
+    monkeypatch.setattr(meshing._io.os, "replace", checked_replace)
     simulate_into(folder, model, 3)
     assert len(renamed) == 3 * 3 + 3 * 2 + 1  # 3 VTU/OBJ per frame, 2 PVD per frame, the PC2 created once
 
@@ -405,7 +405,7 @@ def test_only_stale_temporaries_of_our_pattern_are_removed(tmp_path):
     assert sorted(path.name for path in removed) == sorted(stale)
     assert sorted(path.name for path in tmp_path.iterdir()) == sorted(kept + [f".dir.volspring-tmp-{gone}-k3j2x9a1.vtu"])
     # Untouched for over a day, a temporary file is stale even if its process id is in use again.
-    later = time.time() + volspring._io.STALE_AFTER_SECONDS + 60
+    later = time.time() + meshing._io.STALE_AFTER_SECONDS + 60
     assert [path.name for path in remove_stale_temporaries(tmp_path, now=later)] == [kept[0]]
     assert remove_stale_temporaries(tmp_path / "missing") == []
 
@@ -413,7 +413,7 @@ def test_only_stale_temporaries_of_our_pattern_are_removed(tmp_path):
 KILLED_WRITER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from volspring._io import atomic_path
+    from meshing._io import atomic_path
     from volspring.output import RunFolder
 
     folder = Path(sys.argv[1])

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from volspring import Drag, Gravity, Material, Pins, Scene, SpringModel
+from volspring import Drag, Gravity, Material, Pins, Scene, Model
 from volspring.springs import spring_forces
 
 from conftest import cube_mesh
@@ -13,7 +13,7 @@ RUBBER = Material(E=1e5, nu=0.3, density=1000.0)
 
 @pytest.fixture
 def model():
-    return SpringModel.from_mesh(cube_mesh((2, 1, 1), size=(0.2, 0.1, 0.1)), RUBBER)
+    return Model.from_mesh(cube_mesh((2, 1, 1), size=(0.2, 0.1, 0.1)), RUBBER)
 
 
 def test_scene_without_forces_computes_springs_only(model):
@@ -26,7 +26,7 @@ def test_scene_without_forces_computes_springs_only(model):
 
 def test_gravity_force_and_potential(model):
     g = (0.0, -9.81, 0.0)
-    scene = Scene(model, forces=[Gravity(model.masses, g)])
+    scene = Scene(model, forces=[Gravity(g=g)])
     x = model.rest_positions
     forces = scene.forces_at(x, np.zeros_like(x), 0.0)
     # Springs at rest add nothing; the net force is the weight m_total g to round-off.
@@ -38,15 +38,15 @@ def test_gravity_force_and_potential(model):
 
 
 def test_drag_force_and_jacobian(model):
-    drag = Drag(model.masses, rate=0.5)
+    drag = Drag(rate=0.5)
     v = np.ones((model.node_count, 3))
     out = np.zeros_like(v)
-    drag.accumulate(None, v, 0.0, out)
+    drag.accumulate(model, None, v, 0.0, out)
     assert np.allclose(out, -0.5 * model.masses[:, None] * v)
-    _, dFdv = drag.jacobian(None, v, 0.0)
+    _, dFdv = drag.jacobian(model, None, v, 0.0)
     assert np.allclose(dFdv @ v.ravel(), out.ravel())
     with pytest.raises(ValueError, match="drag rate = -1"):
-        Drag(model.masses, rate=-1.0)
+        Drag(rate=-1.0)
 
 
 def test_pins_hold_rest_or_follow_prescribed_motion(model):
@@ -120,34 +120,36 @@ def test_moving_pins_follow_the_order_given(model):
 
 
 def test_scene_refuses_what_it_cannot_use(model):
-    gravity = Gravity(model.masses)
-    with pytest.raises(TypeError, match="model must be a volspring SpringModel, got TetMesh"):
+    gravity = Gravity()
+    with pytest.raises(TypeError, match="model must be a volspring Model, got TetMesh"):
         Scene(cube_mesh((1, 1, 1)))
     with pytest.raises(TypeError, match=r"pins = \[0, 1\] is not a volspring Pins; expected e.g. pins=Pins\(\[0, 1\]\)"):
         Scene(model, pins=[0, 1])
     with pytest.raises(TypeError, match=r"forces is a single Gravity; expected a sequence, e.g. forces=\[...\]"):
         Scene(model, forces=gravity)
-    with pytest.raises(TypeError, match=r"forces\[1\] = 9.81 has no accumulate\(x, v, t, out\) method"):
+    with pytest.raises(TypeError, match=r"forces\[1\] = 9.81 has no accumulate\(model, x, v, t, out\) method"):
         Scene(model, forces=[gravity, 9.81])
     with pytest.raises(TypeError, match=r"obstacles\[0\] = 'floor' has no project\(x, v, x_start, t, dt, free\) method"):
         Scene(model, obstacles=["floor"])
     with pytest.raises(ValueError, match=r"forces\[1\] \(Drag\) has 3 masses, but the model has 12 nodes"):
-        Scene(model, forces=[gravity, Drag([1.0, 1.0, 1.0], rate=1.0)])
+        Scene(model, forces=[gravity, Drag(masses=[1.0, 1.0, 1.0], rate=1.0)])
 
 
 def test_gravity_and_drag_check_their_input(model):
     with pytest.raises(ValueError, match=r"g = \[0, 0, nan\] is not a finite 3-vector"):
-        Gravity(model.masses, [0, 0, np.nan])
+        Gravity(g=[0, 0, np.nan])
     with pytest.raises(ValueError, match=r"masses\[1\] = -1.0 kg is not finite and >= 0"):
-        Gravity([1.0, -1.0])
+        Gravity(masses=[1.0, -1.0])
     with pytest.raises(ValueError, match=r"masses must have shape \(n,\) with n > 0, got \(2, 6\)"):
-        Drag(model.masses.reshape(2, 6), rate=1.0)
+        Drag(masses=model.masses.reshape(2, 6), rate=1.0)
     with pytest.raises(ValueError, match="drag rate = nan 1/s is not finite and >= 0"):
-        Drag(model.masses, rate=float("nan"))
-    # A zero mass exempts a node (e.g. gravity on one body of several); lists are taken.
-    partial = Gravity([0.0, 2.0], (0, 0, -1))
+        Drag(rate=float("nan"))
+    # A zero mass exempts a node (e.g. gravity on one body of several); lists are taken, and they
+    # override the model's masses (1 kg each here).
+    pair = Model.from_arrays([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], [1.0, 1.0], [], stiffness=1.0)
+    partial = Gravity(masses=[0.0, 2.0], g=(0, 0, -1))
     out = np.zeros((2, 3))
-    partial.accumulate(None, None, 0.0, out)
+    partial.accumulate(pair, None, None, 0.0, out)
     assert out.tolist() == [[0.0, 0.0, 0.0], [0.0, 0.0, -2.0]]
 
 

@@ -7,7 +7,7 @@ import pytest
 from conftest import cube_mesh
 
 from meshing.shells import add_shells
-from volspring import SpringTopology, TetMesh
+from meshing import SpringTopology, TetMesh
 
 
 def pitted_box() -> TetMesh:

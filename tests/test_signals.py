@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from volspring._io import is_temporary_name
+from meshing._io import is_temporary_name
 from volspring._signals import Interrupted, Terminated, exit_status, handle_termination, interruption_name
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
@@ -21,7 +21,7 @@ pytestmark = pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
 WRITER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
-    from volspring._io import atomic_path
+    from meshing._io import atomic_path
     from volspring._signals import exit_status, handle_termination, interruption_name, Interrupted
 
     def write(target):
@@ -90,7 +90,7 @@ def test_a_signal_as_the_temporary_file_is_created_leaves_nothing(tmp_path, monk
     runs this way while atomic_path used tempfile.mkstemp, which creates the file before the clean-up
     is armed.
     """
-    from volspring._io import atomic_path
+    from meshing._io import atomic_path
 
     real_open = os.open
 

@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
-from volspring import Drag, Gravity, Material, Pins, Scene, SpringModel
+from volspring import Drag, Gravity, Material, Pins, Scene, Model
 from volspring.errors import SimulationDiverged, StepTooLarge, StepTooLargeWarning, TetsInvertedWarning
 from volspring.integrators import make_integrator
 from volspring.simulate import SimulationResult, simulate
@@ -18,7 +18,7 @@ SOFT = Material(E=1e5, nu=0.3, density=1000.0)
 
 
 def pair_scene():
-    return Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 3.0], [[0, 1]], stiffness=100.0))
+    return Scene(Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 3.0], [[0, 1]], stiffness=100.0))
 
 
 def stretched(scene):
@@ -88,8 +88,8 @@ def test_resumed_run_is_bit_identical():
 
 def falling_body():
     mesh = cube_mesh((2, 2, 2), size=(0.1, 0.1, 0.1))
-    model = SpringModel.from_mesh(mesh, SOFT)
-    scene = Scene(model, forces=[Gravity(model.masses)])
+    model = Model.from_mesh(mesh, SOFT)
+    scene = Scene(model, forces=[Gravity()])
     rng = np.random.default_rng(0)
     state = scene.initial_state(v=0.05 * rng.standard_normal((model.node_count, 3)))
     return scene, state, 0.5 * critical_step("verlet", omega_max_estimate(scene))
@@ -128,7 +128,7 @@ def test_recorded_momenta_of_a_falling_spinning_body():
 
 def blowing_up(factor=1.05):
     mesh = cube_mesh((2, 2, 2), size=(0.1, 0.1, 0.1))
-    scene = Scene(SpringModel.from_mesh(mesh, Material(E=1e9, nu=0.3, density=1000.0)))
+    scene = Scene(Model.from_mesh(mesh, Material(E=1e9, nu=0.3, density=1000.0)))
     v0 = 1e-3 * np.random.default_rng(2).standard_normal((scene.model.node_count, 3))
     return scene, scene.initial_state(v=v0), factor * critical_step("symplectic_euler", omega_max_estimate(scene))
 
@@ -175,8 +175,8 @@ def test_energy_limit():
 
 def test_no_false_runaway_for_a_damped_falling_body_and_drag():
     mesh = cube_mesh((2, 1, 1), size=(0.2, 0.1, 0.1))
-    model = SpringModel.from_mesh(mesh, SOFT, damping_ratio=0.1)
-    scene = Scene(model, forces=[Gravity(model.masses), Drag(model.masses, rate=5.0)],
+    model = Model.from_mesh(mesh, SOFT, damping_ratio=0.1)
+    scene = Scene(model, forces=[Gravity(), Drag(rate=5.0)],
                   pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
     dt = 0.5 * critical_step("symplectic_euler", omega_max_estimate(scene))
     result = simulate(scene, "symplectic_euler", duration=300 * dt, dt=dt, frame_dt=100 * dt)
@@ -215,8 +215,8 @@ def test_bad_arguments_are_named(options, message):
 def test_inverted_tets_are_reported_per_frame_with_one_warning():
     # A soft hanging beam (E = 1e4 Pa) turns tets inside out: the issue saw 76 of 821 at t = 1 s.
     mesh = cube_mesh((8, 2, 2), size=(1.0, 0.1, 0.1))
-    model = SpringModel.from_mesh(mesh, Material(E=1e4, nu=0.45, density=1100.0), damping_ratio=0.05)
-    scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+    model = Model.from_mesh(mesh, Material(E=1e4, nu=0.45, density=1100.0), damping_ratio=0.05)
+    scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
     with pytest.warns(TetsInvertedWarning, match=r"\d+ of 192 tets are inverted") as caught:
         result = simulate(scene, "implicit_euler", duration=1.0, dt=0.01, frame_dt=0.1)
     assert len([w for w in caught if issubclass(w.category, TetsInvertedWarning)]) == 1  # once per run
@@ -229,8 +229,8 @@ def test_inverted_tets_are_reported_per_frame_with_one_warning():
 
 def test_a_stiff_run_reports_no_inverted_tets():
     mesh = cube_mesh((4, 1, 1), size=(0.4, 0.1, 0.1))
-    model = SpringModel.from_mesh(mesh, Material(E=1e7, nu=0.3, density=1000.0), damping_ratio=0.05)
-    scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+    model = Model.from_mesh(mesh, Material(E=1e7, nu=0.3, density=1000.0), damping_ratio=0.05)
+    scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
     with warnings.catch_warnings():
         warnings.simplefilter("error", TetsInvertedWarning)
         result = simulate(scene, "implicit_euler", duration=0.1, dt=0.01)
@@ -239,7 +239,7 @@ def test_a_stiff_run_reports_no_inverted_tets():
 
 def test_the_start_state_is_checked_against_the_scene():
     scene = pair_scene()
-    other = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [1.0] * 3, [[0, 1], [1, 2]],
+    other = Scene(Model.from_arrays([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [1.0] * 3, [[0, 1], [1, 2]],
                                           stiffness=1.0))
     with pytest.raises(ValueError, match=r"state.x has shape \(3, 3\), but the scene's model has 2 nodes"):
         simulate(scene, "verlet", duration=0.1, dt=0.01, state=other.initial_state())

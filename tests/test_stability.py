@@ -13,7 +13,7 @@ import volspring.integrators.explicit
 import volspring.integrators.verlet
 import volspring.simulate
 import volspring.stability
-from volspring import Material, Pins, Scene, SpringModel
+from volspring import Material, Pins, Scene, Model
 from volspring.errors import StepTooLarge, StepTooLargeWarning
 from volspring.stability import (StabilityGuard, critical_step, critical_steps, growth_per_step, omega_max,
                                  omega_max_bound, omega_max_estimate)
@@ -42,12 +42,12 @@ def reference_omega_max(scene):
 
 def scenes():
     mesh = cube_mesh((2, 2, 3), size=(0.2, 0.2, 0.3))
-    model = SpringModel.from_mesh(mesh, MATERIAL)
+    model = Model.from_mesh(mesh, MATERIAL)
     rng = np.random.default_rng(0)
     # Masses spread over 4 decades: the bound must hold whatever the mass ratio.
-    uneven = SpringModel.from_arrays(model.rest_positions, 10 ** rng.uniform(-2, 2, model.node_count),
+    uneven = Model.from_arrays(model.rest_positions, 10 ** rng.uniform(-2, 2, model.node_count),
                                      model.springs, stiffness=model.stiffness)
-    bigger = SpringModel.from_mesh(cube_mesh((4, 4, 4)), MATERIAL, rule="lloyd")  # 375 dofs: Lanczos path
+    bigger = Model.from_mesh(cube_mesh((4, 4, 4)), MATERIAL, rule="lloyd")  # 375 dofs: Lanczos path
     face = Pins(np.flatnonzero(mesh.points[:, 0] == 0))
     return {"cube": Scene(model), "pinned": Scene(model, pins=face), "uneven": Scene(uneven),
             "uneven_pinned": Scene(uneven, pins=face), "lanczos": Scene(bigger)}
@@ -80,7 +80,7 @@ def test_large_problem_path_is_safe_and_close():
 
 def test_pins_remove_dofs():
     # Two masses on one spring: omega = sqrt(k / mu); pin one and it becomes sqrt(k / m_free).
-    pair = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 3.0], [[0, 1]], stiffness=300.0)
+    pair = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 3.0], [[0, 1]], stiffness=300.0)
     assert omega_max_estimate(pair) == pytest.approx(math.sqrt(300.0 / 0.75), rel=1e-12)
     assert omega_max_estimate(Scene(pair, pins=Pins([0]))) == pytest.approx(10.0, rel=1e-12)
     # Gershgorin for the pair: row of node 0 gives (k + k) / m_0; for the pinned pair k / m_1 (exact).
@@ -140,3 +140,38 @@ def test_guard_warns_raises_or_stays_quiet():
         euler.check(0.01 * critical / 2, steps=100_000)
     with pytest.raises(ValueError, match="guard action = 'loud'"):
         StabilityGuard(scene, "verlet", action="loud")
+
+
+def test_guard_computes_omega_max_once_per_guard_or_takes_it_given(monkeypatch):
+    scene = SCENES["cube"]
+    exact = omega_max_estimate(scene)
+    calls = []
+
+    def counted(system, *, method="estimate", x=None):
+        calls.append(method)
+        return exact
+
+    monkeypatch.setattr(volspring.stability, "omega_max", counted)
+    guard = StabilityGuard(scene, "verlet", action="raise")
+    for _ in range(3):
+        guard.check(0.5 * 2 / exact)
+    assert calls == ["estimate"]  # once for this guard, not once per check
+    # No state shared behind the caller's back: another guard on the same scene computes its own.
+    StabilityGuard(scene, "verlet", method="bound").check(0.5 * 2 / exact)
+    assert calls == ["estimate", "bound"]
+    # A caller that knows omega_max hands it over and nothing is computed.
+    given = StabilityGuard(scene, "symplectic_euler", action="raise", omega_max=exact)
+    given.check(0.99 * 2 / exact)
+    with pytest.raises(StepTooLarge, match="above the critical step"):
+        given.check(1.01 * 2 / exact)
+    assert calls == ["estimate", "bound"]
+    with pytest.raises(ValueError, match="omega_max = -1.0 rad/s"):
+        StabilityGuard(scene, "verlet", omega_max=-1.0)
+
+
+def test_stability_module_keeps_no_mutable_state():
+    # Scenes are sent to worker processes: a module-level cache would be per process and never freed.
+    mutable = {name: type(value).__name__ for name, value in vars(volspring.stability).items()
+               if not name.startswith("__") and isinstance(value, (dict, list, set))
+               or type(value).__name__ in ("WeakKeyDictionary", "WeakValueDictionary")}
+    assert mutable == {}

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from conftest import cube_mesh
 
-from volspring import Gravity, Material, Pins, Scene, SpringModel
+from volspring import Gravity, Material, Pins, Scene, Model
 from volspring.errors import SolverNotConverged
 from volspring.integrators.implicit import ImplicitEuler
 from volspring.statics import solve_static
@@ -14,9 +14,9 @@ G = 9.81
 
 
 def pinned_beam(E=1e6, cells=(16, 4, 4)):
-    model = SpringModel.from_mesh(cube_mesh(cells, (1.0, 0.2, 0.2)), Material(E, 0.25, 1000.0))
+    model = Model.from_mesh(cube_mesh(cells, (1.0, 0.2, 0.2)), Material(E, 0.25, 1000.0))
     pins = Pins(np.flatnonzero(model.rest_positions[:, 0] < 1e-9))
-    return Scene(model, forces=[Gravity(model.masses)], pins=pins)
+    return Scene(model, forces=[Gravity()], pins=pins)
 
 
 def hanging_string(count=8, *, seed=0, direction=(0.0, 0.0, -1.0)):
@@ -27,8 +27,8 @@ def hanging_string(count=8, *, seed=0, direction=(0.0, 0.0, -1.0)):
     masses = rng.uniform(0.01, 0.1, count + 1)
     stiffness = rng.uniform(50.0, 500.0, count)
     springs = np.stack([np.arange(count), np.arange(1, count + 1)], axis=1)
-    model = SpringModel.from_arrays(positions, masses, springs, stiffness=stiffness)
-    return Scene(model, forces=[Gravity(model.masses)], pins=Pins([0])), rest, masses, stiffness
+    model = Model.from_arrays(positions, masses, springs, stiffness=stiffness)
+    return Scene(model, forces=[Gravity()], pins=Pins([0])), rest, masses, stiffness
 
 
 @pytest.mark.parametrize("solver", ["amg", "direct"])
@@ -95,9 +95,9 @@ def test_static_answer_equals_a_settled_implicit_run():
 
 
 def test_singular_problems_raise():
-    model = SpringModel.from_mesh(cube_mesh((2, 2, 2)), Material(1e6, 0.25, 1000.0))
+    model = Model.from_mesh(cube_mesh((2, 2, 2)), Material(1e6, 0.25, 1000.0))
     with pytest.raises(ValueError, match="would fall"):
-        solve_static(Scene(model, forces=[Gravity(model.masses)]))
+        solve_static(Scene(model, forces=[Gravity()]))
     with pytest.raises(ValueError, match="rigid motion"):
         solve_static(Scene(model))
 
@@ -113,8 +113,8 @@ def test_stiff_bodies_converge_to_the_roundoff_floor():
     mesh = cube_mesh((10, 2, 2), (1.0, 0.1, 0.1))
     sags = {}
     for E in (1e9, 1e12):
-        model = SpringModel.from_mesh(mesh, Material(E, 0.3, 1000.0))
-        scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+        model = Model.from_mesh(mesh, Material(E, 0.3, 1000.0))
+        scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
         result = solve_static(scene)
         sags[E] = float((result.x - model.rest_positions)[:, 2].min())
     # Linear elasticity: the sag scales as 1/E. At E = 1e9 the strain is 1e-5, so geometric

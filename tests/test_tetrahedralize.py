@@ -8,8 +8,8 @@ from scipy.spatial import cKDTree
 from meshing.shapes import box, parse_shape, sphere
 from meshing.surface import SurfaceError, load_surface
 from meshing.tetrahedralize import MAX_TETS, tetrahedralize
-from volspring import TetMesh
-from volspring.mesh import signed_tet_volumes
+from meshing import TetMesh
+from meshing.geometry import signed_tet_volumes
 
 METHODS = ["gmsh", "delaunay"]
 # (spec, size, smallest radius of curvature rho [m]); sizes are coarse to keep the suite fast.

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from volspring.units import (LARGE_BODY_DIAGONAL, UNITS, add_unit_arguments, length_factor, scaled_points,
+from meshing.units import (LARGE_BODY_DIAGONAL, UNITS, add_unit_arguments, length_factor, scaled_points,
                              warn_if_large)
 
 

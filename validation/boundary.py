@@ -1,6 +1,7 @@
-"""Supports and loads of a reference problem, and their resolution on a :class:`volspring.TetMesh`.
+"""Supports and loads of a reference problem, and their resolution on a :class:`meshing.TetMesh`.
 
-:class:`Box`, :class:`Clamp` and :class:`Traction` say where a body is held and loaded. The
+:class:`Clamp` and :class:`Traction` say where a body is held and loaded, on a region
+(:mod:`volspring.regions`: :class:`~volspring.regions.Box`, re-exported here, a face or a half-space). The
 ``resolve_*`` functions turn them into plain numpy arrays on the TetMesh nodes, edges and boundary
 faces (no scikit-fem here), checking that every region selects something and that the clamps hold
 all six rigid-body modes. The FEM reference (:mod:`validation.fem`) assembles from these arrays,
@@ -9,7 +10,7 @@ and the FEM cache (:mod:`validation.cache`) hashes them, so a region is known by
 Examples
 --------
 >>> import numpy as np
->>> from volspring import TetMesh
+>>> from meshing import TetMesh
 >>> from validation.boundary import Box, Clamp, resolve_clamps
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 >>> tets = [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]]
@@ -30,6 +31,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshing.geometry import rigid_body_modes
+from volspring.regions import Box  # re-exported: validation.Box and validation.boundary.Box keep working
+
 __all__ = [
     "Box",
     "Clamp",
@@ -39,41 +43,9 @@ __all__ = [
     "resolve_clamps",
     "resolve_point_loads",
     "resolve_tractions",
-    "rigid_body_modes",
 ]
 
 _COMPONENTS = {"x": 0, "y": 1, "z": 2}
-
-@dataclass(frozen=True)
-class Box:
-    """An axis-aligned box region, boundary included; infinite sides are allowed.
-
-    Parameters
-    ----------
-    lower, upper : (3,) float -- corners [m]
-    tolerance : float, optional -- slack on every side [m]; by default 1e-9 times the
-        diagonal of the points tested, so that points on a face of the box count as inside.
-    """
-
-    lower: tuple = (-np.inf, -np.inf, -np.inf)
-    upper: tuple = (np.inf, np.inf, np.inf)
-    tolerance: float | None = None
-
-    @classmethod
-    def plane(cls, axis: str, value: float, **options) -> "Box":
-        """The plane ``axis = value``, e.g. ``Box.plane("x", 0.0)`` for the face x = 0 of a beam."""
-        lower, upper = [-np.inf] * 3, [np.inf] * 3
-        lower[_COMPONENTS[axis]] = upper[_COMPONENTS[axis]] = float(value)
-        return cls(tuple(lower), tuple(upper), **options)
-
-    def __call__(self, points) -> np.ndarray:
-        """(k,) bool -- which of the (k, 3) points [m] lie in the box."""
-        points = np.asarray(points, dtype=float)
-        tolerance = self.tolerance
-        if tolerance is None:
-            tolerance = 1e-9 * float(np.linalg.norm(np.ptp(points, axis=0))) if len(points) else 0.0
-        lower, upper = np.asarray(self.lower, float), np.asarray(self.upper, float)
-        return ((points >= lower - tolerance) & (points <= upper + tolerance)).all(axis=1)
 
 
 @dataclass(frozen=True)
@@ -210,22 +182,12 @@ def resolve_clamps(mesh, clamp) -> FixedDofs:
     return FixedDofs(node_mask, node_values, edge_mask, edge_values)
 
 
-def rigid_body_modes(locations: np.ndarray, components: np.ndarray, centre: np.ndarray, scale: float) -> np.ndarray:
-    """(k, 6) float -- translations along x, y, z and rotations about x, y, z through ``centre``,
-    sampled at k dofs given by their (k, 3) locations [m] and (k,) components; lengths divided by ``scale``."""
-    rows = np.arange(len(locations))
-    modes = np.zeros((len(locations), 6))
-    modes[rows, components] = 1.0
-    for axis in range(3):
-        modes[:, 3 + axis] = np.cross(np.eye(3)[axis], (locations - centre) / scale)[rows, components]
-    return modes
-
-
 def _check_rigid_modes(points: np.ndarray, node_mask: np.ndarray) -> None:
     """Raise if the fixed node components leave an infinitesimal rigid-body motion free."""
     nodes, components = np.nonzero(node_mask)
     centre = points.mean(axis=0)
-    restricted = rigid_body_modes(points[nodes], components, centre, np.abs(points - centre).max())
+    restricted = rigid_body_modes(points[nodes], components=components, centre=centre,
+                                  scale=np.abs(points - centre).max())
     values, vectors = np.linalg.eigh(restricted.T @ restricted)
     # Entries of the modes are O(1) after scaling, so B^T B has eigenvalues O(fixed dofs) for constrained
     # directions and round-off (1e-16 relative) for free ones; 1e-10 separates the two with room to spare.

@@ -4,8 +4,9 @@ A P2 reference costs seconds to minutes (REFERENCE.md: about 6 s to assemble at 
 10k with scikit-fem's default quadrature), and reports solve the same cases again and again. The key
 is a SHA-256 of the mesh (points and tets bytes), the element, the material, the loads and the
 clamps *as resolved on the mesh* (fixed-dof masks and values, loaded faces), the modal options, and
-the code version (volspring's version and the bytes of every module the FEM answer depends on:
-``validation/boundary.py``, ``fem_assembly.py``, ``fem_solvers.py`` and ``fem.py``), so a callable
+the code version (volspring's version and the bytes of every module the FEM answer depends on: the
+FEM modules of validation, volspring's solver stack and regions, meshing's kernels and tolerances;
+:data:`REFERENCE_MODULES`), so a callable
 region is cached by what it selects, and any change to the reference code starts afresh. Files are
 ``<folder>/<kind>-<key>.npz``, written atomically.
 
@@ -13,7 +14,7 @@ Examples
 --------
 >>> import tempfile
 >>> import numpy as np
->>> from volspring import TetMesh
+>>> from meshing import TetMesh
 >>> from validation.cache import cached_solve_static
 >>> from validation.boundary import Box
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import inspect
 import logging
 import os
 import zipfile
@@ -37,8 +39,9 @@ from pathlib import Path
 import numpy as np
 
 import volspring
-from validation import boundary, fem, fem_assembly, fem_solvers
-from volspring._io import atomic_path
+from meshing._io import atomic_path
+from meshing import tolerances
+from validation import boundary, fem, fem_solvers
 
 __all__ = ["cache_key", "cached_solve_modes", "cached_solve_static", "default_folder"]
 
@@ -50,8 +53,23 @@ def default_folder() -> Path:
     return Path(os.environ.get("VOLSPRING_CACHE") or Path.home() / ".cache" / "volspring" / "fem")
 
 
-#: The modules whose code determines a FEM answer: a change to any of them changes every key.
-REFERENCE_MODULES = (boundary, fem_assembly, fem_solvers, fem)
+def _modules_used(root, packages=("validation.", "volspring.", "meshing.")) -> tuple:
+    """``root`` and every module of ours its functions, classes and imported modules come from, transitively."""
+    found, pending = {}, [root]
+    while pending:
+        module = pending.pop()
+        if module.__name__ in found:
+            continue
+        found[module.__name__] = module
+        used = {inspect.getmodule(value) for value in vars(module).values()
+                if inspect.isfunction(value) or inspect.isclass(value) or inspect.ismodule(value)}
+        pending += [item for item in used if item is not None and item.__name__.startswith(packages)]
+    return tuple(found[name] for name in sorted(found))
+
+
+#: The modules whose code determines a FEM answer (the FEM modules, the solvers, regions and geometric
+#: kernels they use, found by following what :mod:`validation.fem` uses): a change to any changes every key.
+REFERENCE_MODULES = _modules_used(fem) + (tolerances,)  # numbers, not functions: named, as the walk cannot see them
 
 
 def _code_version() -> bytes:
@@ -67,7 +85,7 @@ def cache_key(kind: str, mesh, material, *, clamp, gravity=None, traction=None, 
     ----------
     kind : {"static", "modes"}
     mesh, material, clamp, gravity, traction, point_loads, element
-        As for :func:`validation.fem.solve_static`; clamps and tractions are resolved on the mesh
+        As for :func:`validation.fem.solve_fem_static`; clamps and tractions are resolved on the mesh
         first, so equal selections give equal keys however they were written.
     **options
         Further plain values that change the answer (``count``, ``mass`` for modes).
@@ -124,8 +142,8 @@ def _load(path: Path, cls):
     values = {}
     for item in dataclasses.fields(cls):
         if item.name == "info":
-            values["info"] = fem_solvers.SolverInfo(**{sub.name: plain(arrays[f"info.{sub.name}"])
-                                                      for sub in dataclasses.fields(fem_solvers.SolverInfo)})
+            values["info"] = fem_solvers.ReferenceInfo(**{sub.name: plain(arrays[f"info.{sub.name}"])
+                                                      for sub in dataclasses.fields(fem_solvers.ReferenceInfo)})
         else:
             values[item.name] = plain(arrays[item.name])
     return cls(**values)
@@ -146,18 +164,18 @@ def _cached(kind, solve, cls, mesh, material, folder, arguments):
 
 
 def cached_solve_static(mesh, material, *, folder=None, **arguments) -> fem.StaticSolution:
-    """:func:`validation.fem.solve_static`, read from ``folder`` when solved before (same key).
+    """:func:`validation.fem.solve_fem_static`, read from ``folder`` when solved before (same key).
 
     Parameters
     ----------
     folder : path, optional -- cache folder, default :func:`default_folder`
-    **arguments -- as for :func:`validation.fem.solve_static` (``solver`` and ``tolerance`` are not part
+    **arguments -- as for :func:`validation.fem.solve_fem_static` (``solver`` and ``tolerance`` are not part
         of the key: they change the answer only within the solver tolerance)
     """
-    return _cached("static", fem.solve_static, fem.StaticSolution, mesh, material, folder, arguments)
+    return _cached("static", fem.solve_fem_static, fem.StaticSolution, mesh, material, folder, arguments)
 
 
 def cached_solve_modes(mesh, material, *, folder=None, **arguments) -> fem.ModalSolution:
-    """:func:`validation.fem.solve_modes`, read from ``folder`` when solved before (same key)."""
+    """:func:`validation.fem.solve_fem_modes`, read from ``folder`` when solved before (same key)."""
     arguments = {"count": 6, "element": "P2", "mass": "consistent"} | arguments  # defaults, so they hash alike
-    return _cached("modes", fem.solve_modes, fem.ModalSolution, mesh, material, folder, arguments)
+    return _cached("modes", fem.solve_fem_modes, fem.ModalSolution, mesh, material, folder, arguments)

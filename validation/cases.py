@@ -28,8 +28,13 @@ Built-in cases (names in :data:`CASE_NAMES`), all in SI units:
     The gravity cantilever's lowest vibration frequencies; Euler-Bernoulli gives 8.85 Hz for the
     first bending mode (a square section has a degenerate pair, y and z).
 ``own_mesh``
-    Any :class:`volspring.TetMesh` with a clamp region and gravity and/or a traction
-    (:func:`own_mesh_case`, used by ``volspring-validate --mesh FILE --clamp REGION``).
+    Any :class:`meshing.TetMesh` with a clamp region and gravity and/or a traction
+    (:func:`own_mesh_case`, used by ``volspring-validate --mesh FILE --clamp REGION``; its regions
+    are written as text for :func:`parse_region`).
+
+This module is the one public home of the case names; :class:`Case` and :class:`BeamGeometry` are
+defined in ``validation/_case.py``, and :func:`own_mesh_case`, :func:`check_held` and
+:func:`parse_region` in ``validation/_own_mesh.py``.
 
 Examples
 --------
@@ -41,16 +46,15 @@ Examples
 
 from __future__ import annotations
 
-import re
-from dataclasses import dataclass, field
-
 import numpy as np
 
-from validation import analytic
 from meshing import structured_box
-from validation.boundary import Box, Clamp, Traction
+from validation import analytic
+from validation._case import BeamGeometry, Case
+from validation._own_mesh import check_held, own_mesh_case, parse_region
+from validation.boundary import Clamp, Traction
 from volspring.material import Material
-from volspring.mesh import TetMesh
+from volspring.regions import Box
 
 __all__ = [
     "BEAM",
@@ -81,68 +85,6 @@ BAR = {"length_m": 1.0, "width_m": 0.1, "E_pa": 1e6, "nu": 0.3, "density_kg_per_
        "gravity_m_per_s2": 9.81}
 #: The compressed cube: edge, material (nu varies), axial strain.
 CUBE = {"edge_m": 1.0, "E_pa": 1e6, "density_kg_per_m3": 1000.0, "strain": -0.01}
-
-
-@dataclass(frozen=True)
-class BeamGeometry:
-    """A prismatic beam along x from 0 to ``length``, bending along z.
-
-    Parameters
-    ----------
-    length, width, height : float -- [m]; the section spans y in [0, width], z in [0, height]
-    """
-
-    length: float
-    width: float
-    height: float
-
-
-@dataclass(frozen=True, eq=False)
-class Case:
-    """One validation problem on one mesh.
-
-    Parameters
-    ----------
-    name : str -- one of :data:`CASE_NAMES`
-    title : str -- one line for the report
-    kind : {"static", "modes"} -- static equilibrium or vibration frequencies
-    mesh : TetMesh -- rest shape [m]
-    material : Material
-    clamps : tuple of Clamp -- supports, as :func:`validation.fem.solve_static` takes them
-    gravity : (3,) float or None -- [m/s^2]
-    tractions : tuple of Traction -- surface loads [Pa]
-    tip_nodes : (n,) bool or None -- the nodes whose mean displacement along ``tip_direction``
-        is the case's "tip deflection"; None to take the node the FEM reference moves most
-    tip_direction : (3,) float or None -- unit vector; None as for ``tip_nodes``
-    analytic : dict -- closed-form values, keys with units (``tip_deflection_m``, ...)
-    parameters : dict -- the inputs, keys with units, for results.json
-    beam : BeamGeometry or None -- for the deflection profile along the beam
-    cells : (3,) int or None -- grid cells of a structured mesh
-    """
-
-    name: str
-    title: str
-    kind: str
-    mesh: TetMesh
-    material: Material
-    clamps: tuple
-    gravity: tuple | None = None
-    tractions: tuple = ()
-    tip_nodes: np.ndarray | None = None
-    tip_direction: np.ndarray | None = None
-    analytic: dict = field(default_factory=dict)
-    parameters: dict = field(default_factory=dict)
-    beam: BeamGeometry | None = None
-    cells: tuple | None = None
-
-    @property
-    def material_tuple(self) -> tuple:
-        """(E [Pa], nu, density [kg/m^3]) as :mod:`validation.fem` takes it."""
-        return (self.material.E, self.material.nu, self.material.density)
-
-    def fem_arguments(self) -> dict:
-        """Keyword arguments of :func:`validation.fem.solve_static` for this case (no mesh, material)."""
-        return {"clamp": list(self.clamps), "gravity": self.gravity, "traction": list(self.tractions) or None}
 
 
 def _beam(per_height: int, **changes) -> tuple:
@@ -242,141 +184,6 @@ def uniaxial_compression(*, cells: int = 4, nu: float = 0.3, strain: float = CUB
                             "density_kg_per_m3": material.density, "strain": strain, "cells": cells,
                             "tip": "lateral displacement of the face y = edge"},
                 cells=(cells, cells, cells))
-
-
-def own_mesh_case(mesh: TetMesh, clamp, *, material: Material, gravity=(0.0, 0.0, -9.81), tractions=(),
-                  source: str = "mesh") -> Case:
-    """Any tet mesh with a clamp region and loads.
-
-    Parameters
-    ----------
-    mesh : TetMesh
-    clamp : region (callable (k, 3) -> (k,) bool, e.g. from :func:`parse_region`) -- its nodes are held
-    material : Material
-    gravity : (3,) float or None -- [m/s^2]
-    tractions : sequence of Traction -- [Pa]
-    source : str -- where the mesh came from, for the report
-
-    Raises
-    ------
-    ValueError
-        If the clamp region holds no node, or too few to hold the body (a singular problem).
-    """
-    held = np.asarray(clamp(mesh.points), dtype=bool)
-    if not held.any():
-        low, high = mesh.bounds
-        raise ValueError(f"the clamp region {_name(clamp)} contains no mesh node; the mesh spans "
-                         + " x ".join(f"[{a:.4g}, {b:.4g}]" for a, b in zip(low, high)) + " m")
-    check_held(mesh, held)
-    if gravity is None and not tractions:
-        raise ValueError("no load: give gravity or a traction")
-    return Case("own_mesh", f"Your mesh ({source})", "static", mesh, material, (Clamp(clamp),),
-                gravity=None if gravity is None else tuple(float(g) for g in gravity), tractions=tuple(tractions),
-                parameters={"source": source, "clamp": _name(clamp), "E_pa": material.E, "nu": material.nu,
-                            "density_kg_per_m3": material.density,
-                            "gravity_m_per_s2": None if gravity is None else [float(g) for g in gravity],
-                            "tractions_pa": [list(map(float, t.vector)) for t in tractions]})
-
-
-def check_held(mesh: TetMesh, held: np.ndarray) -> None:
-    """Raise unless the held nodes fix every rigid motion of every connected part of the mesh.
-
-    Parameters
-    ----------
-    mesh : TetMesh
-    held : (n,) bool -- nodes held in place (all components)
-
-    Raises
-    ------
-    ValueError
-        Naming the part (its node count) that is free or can still rotate about a line.
-    """
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-
-    edges = mesh.edges
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(mesh.node_count,) * 2)
-    count, label = connected_components(graph, directed=False)
-    held_per_part = np.bincount(label[held], minlength=count)
-    free_parts = np.flatnonzero(held_per_part == 0)
-    if free_parts.size:
-        size = int((label == free_parts[0]).sum())
-        raise ValueError(f"{free_parts.size} of the mesh's {count} connected part(s) have no clamped node "
-                         f"(the first has {size} nodes): the problem is singular, every rigid motion of that "
-                         "part is free; clamp a region in every part")
-    for part in range(count):
-        points = mesh.points[held & (label == part)]
-        spread = np.linalg.svd(points - points.mean(axis=0), compute_uv=False) if len(points) > 1 else np.zeros(3)
-        scale = float(np.ptp(mesh.points, axis=0).max())
-        # A held set on one line leaves the rotation about it free (spread rank < 2); 1e-9 of the mesh
-        # size separates collinear round-off from a real second direction.
-        if len(points) < 3 or (spread[1] if len(spread) > 1 else 0.0) <= 1e-9 * scale * np.sqrt(len(points)):
-            raise ValueError(f"the clamp holds {len(points)} node(s) on one line in a part of "
-                             f"{int((label == part).sum())} nodes: the rotation about that line is free, so the "
-                             "problem is singular; clamp a region with three non-collinear nodes")
-
-
-_FACE = re.compile(r"^([xyz])(min|max)$")
-_HALF = re.compile(r"^([xyz])\s*([<>])=?\s*(.+)$")
-_BOX = re.compile(r"^box:(.+)$")
-
-
-def parse_region(text: str, mesh: TetMesh) -> Box:
-    """A clamp or load region from its command-line form.
-
-    Parameters
-    ----------
-    text : str -- ``xmin`` (the nodes on the face of the bounding box with the smallest x; also
-        ``xmax``, ``ymin``, ... ``zmax``), ``x<0.01`` / ``z>1.2`` (a half-space [m]), or
-        ``box:x0,y0,z0,x1,y1,z1`` (an axis-aligned box [m])
-    mesh : TetMesh -- for the bounding-box faces and the tolerance (1e-6 of the mesh size)
-
-    Returns
-    -------
-    Box
-
-    Raises
-    ------
-    ValueError
-        For text in none of these forms.
-    """
-    spec = text.strip().lower().replace(" ", "")
-    size = float(np.linalg.norm(np.ptp(mesh.points, axis=0)))
-    tolerance = 1e-6 * size
-    low, high = mesh.bounds
-    lower, upper = [-np.inf] * 3, [np.inf] * 3
-    axis_of = {"x": 0, "y": 1, "z": 2}
-    if match := _FACE.match(spec):
-        axis = axis_of[match[1]]
-        value = low[axis] if match[2] == "min" else high[axis]
-        lower[axis] = upper[axis] = float(value)
-        return Box(tuple(lower), tuple(upper), tolerance=tolerance)
-    if match := _HALF.match(spec):
-        axis = axis_of[match[1]]
-        value = _number(match[3], text)
-        (upper if match[2] == "<" else lower)[axis] = value
-        return Box(tuple(lower), tuple(upper), tolerance=tolerance)
-    if match := _BOX.match(spec):
-        values = [_number(v, text) for v in match[1].split(",")]
-        if len(values) != 6:
-            raise ValueError(f"region {text!r}: box: takes 6 numbers x0,y0,z0,x1,y1,z1, got {len(values)}")
-        return Box(tuple(values[:3]), tuple(values[3:]), tolerance=tolerance)
-    raise ValueError(f"region {text!r} is not one of xmin, xmax, ymin, ymax, zmin, zmax, x<VALUE, z>VALUE, "
-                     "box:x0,y0,z0,x1,y1,z1")
-
-
-def _number(value: str, text: str) -> float:
-    try:
-        number = float(value)
-    except ValueError:
-        raise ValueError(f"region {text!r}: {value!r} is not a number") from None
-    if not np.isfinite(number):
-        raise ValueError(f"region {text!r}: {value!r} is not a finite number")
-    return number
-
-
-def _name(region) -> str:
-    return getattr(region, "__name__", None) or repr(region)
 
 
 def beam_deflection_profile(case: Case, x) -> np.ndarray:

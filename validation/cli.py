@@ -65,7 +65,7 @@ class _Bar:
 
 def _parser():
     from validation.report import BUILT_IN, STUDIES
-    from volspring.units import add_unit_arguments
+    from meshing.units import add_unit_arguments
 
     parser = argparse.ArgumentParser(
         prog=PROG, description="Compare the spring model with linear-elastic FEM (scikit-fem, P2) on the same "
@@ -102,9 +102,9 @@ class _BadInput(ValueError):
 
 
 def _own_case(args):
+    from meshing.mesh import TetMesh
     from validation.cases import own_mesh_case, parse_region
     from volspring.material import Material
-    from volspring.mesh import TetMesh
 
     if not args.clamp:
         raise _BadInput("--mesh needs --clamp REGION: without a clamp every rigid motion is free and the problem "
@@ -117,7 +117,7 @@ def _own_case(args):
         raise _BadInput(f"--gravity {args.gravity!r} is not three finite numbers GX,GY,GZ")
     try:
         with warnings.catch_warnings():
-            # A body read too large is also logged by volspring.units: shown once, by the log handler.
+            # A body read too large is also logged by meshing.units: shown once, by the log handler.
             warnings.simplefilter("ignore", UserWarning)
             mesh = TetMesh.read(args.mesh, units=args.units, scale=args.scale)
     except (OSError, ValueError) as error:
@@ -192,9 +192,9 @@ def main(argv=None) -> int:
     run = None
     with handle_termination():
         try:
+            from meshing._io import remove_stale_temporaries
             from validation.cache import default_folder
             from validation.report import validate
-            from volspring._io import remove_stale_temporaries
             from volspring.output import RunFolder
 
             try:

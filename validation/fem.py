@@ -1,10 +1,10 @@
-"""Linear-elastic finite-element reference (scikit-fem) on a :class:`volspring.TetMesh`.
+"""Linear-elastic finite-element reference (scikit-fem) on a :class:`meshing.TetMesh`.
 
 The data path reads in one direction, one module per step::
 
     TetMesh, material, clamps, loads  ->  dof masks and loads on the TetMesh (numpy, validation.boundary)
         ->  MeshTet / Basis / asm (scikit-fem, validation.fem_assembly)
-        ->  condensed solve (sparse LU, or AMG + CG, validation.fem_solvers)
+        ->  condensed solve (volspring.solvers: sparse LU, or AMG + CG, via validation.fem_solvers)
         ->  StaticSolution / ModalSolution (arrays on the mesh nodes, here)
 
 P2 tetrahedra are the default reference: P1 tetrahedra lock in bending (a cantilever of
@@ -18,15 +18,15 @@ A unit cube (one cell, six tets) on three symmetry planes, pulled by 1 kPa on it
 uniaxial stress, so the strain is 1e-3 along x and -nu * 1e-3 across, which P1 reproduces exactly.
 
 >>> import numpy as np
->>> from volspring import TetMesh
+>>> from meshing import TetMesh
 >>> from validation.boundary import Box, Clamp, Traction
->>> from validation.fem import solve_static
+>>> from validation.fem import solve_fem_static
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 >>> tets = [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]]
 >>> cube = TetMesh.compact(corners, tets)
 >>> symmetry = [Clamp(Box.plane(axis, 0.0), components=axis) for axis in "xyz"]
 >>> pull = Traction(Box.plane("x", 1.0), (1e3, 0.0, 0.0))
->>> solution = solve_static(cube, (1e6, 0.3, 1000.0), clamp=symmetry, traction=pull, element="P1")
+>>> solution = solve_fem_static(cube, (1e6, 0.3, 1000.0), clamp=symmetry, traction=pull, element="P1")
 >>> solution.displacement[7].round(9)   # the corner (1, 1, 1) [m]
 array([ 0.001 , -0.0003, -0.0003])
 >>> round(solution.volume_change, 9)    # (1 - 2 nu) eps V [m^3]
@@ -35,6 +35,7 @@ array([ 0.001 , -0.0003, -0.0003])
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -46,19 +47,19 @@ import scipy.sparse.linalg as spla
 from skfem import Functional, asm
 from skfem.helpers import div
 
-from validation.boundary import resolve_clamps, resolve_point_loads, resolve_tractions, rigid_body_modes
+from meshing.geometry import rigid_body_modes, signed_tet_volumes
+from validation.boundary import resolve_clamps, resolve_point_loads, resolve_tractions
 from validation.fem_assembly import (check_element, fixed_vector, load_vector, mass_matrix, p1_prolongation,
-                                     skfem_space, stiffness_matrix)
-from validation.fem_solvers import AMG_TOLERANCE, SolverInfo, solve_linear
-from volspring.mesh import signed_tet_volumes
+                                     skfem_space, fem_stiffness_matrix)
+from validation.fem_solvers import AMG_TOLERANCE, ReferenceInfo, solve_linear
 
 __all__ = [
     "ModalSolution",
     "StaticSolution",
     "elastic_constants",
     "error_norms",
-    "solve_modes",
-    "solve_static",
+    "solve_fem_modes",
+    "solve_fem_static",
 ]
 
 logger = logging.getLogger(__name__)
@@ -120,7 +121,7 @@ class StaticSolution:
         minus the total applied load
     dofs : (N,) float -- the whole finite-element vector, in scikit-fem's dof order [m]
     element : str -- ``"P1"`` or ``"P2"``
-    info : SolverInfo
+    info : ReferenceInfo
     """
 
     displacement: np.ndarray
@@ -129,10 +130,10 @@ class StaticSolution:
     reaction_force: np.ndarray
     dofs: np.ndarray
     element: str
-    info: SolverInfo
+    info: ReferenceInfo
 
 
-def solve_static(mesh, material, *, clamp, gravity=None, traction=None, point_loads=None, body_force=None,
+def solve_fem_static(mesh, material, *, clamp, gravity=None, traction=None, point_loads=None, body_force=None,
                  element: str = "P2", solver: str = "auto", tolerance: float = AMG_TOLERANCE) -> StaticSolution:
     """Linear-elastic static displacement of a clamped tet mesh under loads.
 
@@ -175,7 +176,7 @@ def solve_static(mesh, material, *, clamp, gravity=None, traction=None, point_lo
     tractions = resolve_tractions(mesh, traction)
     point_forces = resolve_point_loads(mesh, point_loads)
     space = skfem_space(mesh, element)
-    K = stiffness_matrix(space, E, nu)
+    K = fem_stiffness_matrix(space, E, nu)
     load = load_vector(space, density, gravity, body_force, tractions, point_forces)
     is_fixed, u = fixed_vector(space, fixed)
     free = ~is_fixed
@@ -187,20 +188,20 @@ def solve_static(mesh, material, *, clamp, gravity=None, traction=None, point_lo
         coarse[space.node_dofs] = free[space.node_dofs]
         prolongation = p1_prolongation(mesh, space)[free][:, coarse]
     centre = mesh.points.mean(axis=0)
-    modes = rigid_body_modes(space.basis.doflocs.T[coarse], space.components[coarse], centre,
-                             np.abs(mesh.points - centre).max())
+    modes = rigid_body_modes(space.basis.doflocs.T[coarse], components=space.components[coarse], centre=centre,
+                             scale=np.abs(mesh.points - centre).max())
     assembled = time.perf_counter()
-    u[free], method, iterations, residual = solve_linear(K_free, rhs, solver=solver, tolerance=tolerance,
-                                                         rigid_modes=modes, prolongation=prolongation)
-    solved = time.perf_counter()
+    u[free], solve = solve_linear(K_free, rhs, solver=solver, tolerance=tolerance, rigid_modes=modes,
+                                  prolongation=prolongation)
     reaction = np.bincount(space.components[is_fixed], weights=(K @ u - load)[is_fixed], minlength=3)
     volume_change = asm(Functional(lambda w: div(w["u"])), space.basis, u=space.basis.interpolate(u))
     displacement = u[space.node_dofs]
     deformed = signed_tet_volumes(mesh.points + displacement, mesh.tets).sum() - mesh.volume
-    info = SolverInfo(method, iterations, residual, int(K.shape[0]), int(free.sum()), assembled - start,
-                      solved - assembled)
+    info = ReferenceInfo(**dataclasses.asdict(solve), dof_count=int(K.shape[0]), free_dof_count=int(free.sum()),
+                         assemble_seconds=assembled - start)
     logger.info("%s static solve: %d dofs, %s, %d iterations, residual %.2g, %.2f s assembly + %.2f s solve",
-                element, info.dof_count, method, iterations, residual, info.assemble_seconds, info.solve_seconds)
+                element, info.dof_count, info.method, info.iterations, info.residual, info.assemble_seconds,
+                info.setup_seconds + info.solve_seconds)
     return StaticSolution(displacement, float(volume_change), float(deformed), reaction, u, element, info)
 
 
@@ -215,17 +216,17 @@ class ModalSolution:
     shapes : (k, n, 3) float -- each mode at the mesh nodes, mass-normalised (phi^T M phi = 1) [kg^-1/2]
     element : str -- ``"P1"`` or ``"P2"``
     mass : str -- ``"consistent"`` or ``"lumped"``
-    info : SolverInfo -- ``residual`` is the largest ||K phi - lambda M phi|| / ||K phi||
+    info : ReferenceInfo -- ``residual`` is the largest ||K phi - lambda M phi|| / ||K phi||
     """
 
     frequencies: np.ndarray
     shapes: np.ndarray
     element: str
     mass: str
-    info: SolverInfo
+    info: ReferenceInfo
 
 
-def solve_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2",
+def solve_fem_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2",
                 mass: str = "consistent") -> ModalSolution:
     """Lowest eigenfrequencies of a clamped tet mesh (scipy ``eigsh``, shift-invert about 0).
 
@@ -233,7 +234,7 @@ def solve_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2",
     ----------
     mesh : TetMesh -- rest shape; points [m]
     material : (E, nu, density) -- see :func:`elastic_constants`
-    clamp : region, Clamp or list of Clamp -- as for :func:`solve_static`; prescribed
+    clamp : region, Clamp or list of Clamp -- as for :func:`solve_fem_static`; prescribed
         displacements are ignored (vibration about the clamped rest shape)
     count : int -- number of modes, lowest first
     element : {"P2", "P1"}
@@ -252,7 +253,7 @@ def solve_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2",
     start = time.perf_counter()
     fixed = resolve_clamps(mesh, clamp)
     space = skfem_space(mesh, element)
-    K = stiffness_matrix(space, E, nu)
+    K = fem_stiffness_matrix(space, E, nu)
     M = mass_matrix(space, density)
     if mass == "lumped":
         diagonal = M.diagonal()
@@ -275,7 +276,9 @@ def solve_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2",
     full = np.zeros((space.basis.N, count))
     full[free] = vectors
     shapes = np.moveaxis(full[space.node_dofs], -1, 0)
-    info = SolverInfo("eigsh", 0, residual, int(K.shape[0]), int(free.sum()), assembled - start, solved - assembled)
+    # converged: eigsh raises unless it converged to its tolerance 0, i.e. machine precision.
+    info = ReferenceInfo("eigsh", 0, residual, True, 0.0, solve_seconds=solved - assembled, dof_count=int(K.shape[0]),
+                         free_dof_count=int(free.sum()), assemble_seconds=assembled - start)
     frequencies = np.sqrt(np.clip(eigenvalues, 0.0, None)) / (2 * np.pi)
     logger.info("%s modes (%s mass): %s Hz, %.2f s assembly + %.2f s solve", element, mass,
                 np.array2string(frequencies, precision=4), info.assemble_seconds, info.solve_seconds)
@@ -313,3 +316,10 @@ def error_norms(mesh, solution: StaticSolution, displacement: Callable, gradient
 
     l2, h1 = np.sqrt(asm(squared_errors, basis, u=basis.interpolate(solution.dofs)))
     return float(l2), float(h1)
+
+
+def __getattr__(name):
+    # 0.1 names that clashed with volspring's (volspring.statics, volspring.modes, volspring.assembly).
+    from volspring._deprecation import deprecated_alias
+
+    return deprecated_alias(__name__, name, {"solve_static": ("validation.fem.solve_fem_static", solve_fem_static), "solve_modes": ("validation.fem.solve_fem_modes", solve_fem_modes)})

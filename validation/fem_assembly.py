@@ -9,14 +9,14 @@ with the reason it is exact (or accurate enough).
 Examples
 --------
 >>> import numpy as np
->>> from volspring import TetMesh
->>> from validation.fem_assembly import skfem_space, stiffness_matrix
+>>> from meshing import TetMesh
+>>> from validation.fem_assembly import skfem_space, fem_stiffness_matrix
 >>> corners = np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)], dtype=float)
 >>> tets = [[0, 4, 6, 7], [0, 4, 5, 7], [0, 2, 6, 7], [0, 2, 3, 7], [0, 1, 5, 7], [0, 1, 3, 7]]
 >>> space = skfem_space(TetMesh.compact(corners, tets), "P2")
 >>> int(space.basis.N), space.node_dofs.shape, space.edge_dofs.shape   # 3 x (8 nodes + 19 edges)
 (81, (8, 3), (19, 3))
->>> stiffness_matrix(space, 1e6, 0.3).shape
+>>> fem_stiffness_matrix(space, 1e6, 0.3).shape
 (81, 81)
 """
 
@@ -41,7 +41,7 @@ __all__ = [
     "mass_matrix",
     "p1_prolongation",
     "skfem_space",
-    "stiffness_matrix",
+    "fem_stiffness_matrix",
 ]
 
 _ELEMENTS = {"P1": ElementTetP1, "P2": ElementTetP2}
@@ -114,7 +114,7 @@ def fixed_vector(space: Space, fixed: FixedDofs) -> tuple[np.ndarray, np.ndarray
     return mask, values
 
 
-def stiffness_matrix(space: Space, E: float, nu: float) -> sp.csr_matrix:
+def fem_stiffness_matrix(space: Space, E: float, nu: float) -> sp.csr_matrix:
     """(N, N) CSR -- linear-elastic stiffness [N/m] for E [Pa] and nu, at the space's own quadrature order."""
     return asm(linear_elasticity(*lame_parameters(E, nu)), space.basis).tocsr()
 
@@ -160,3 +160,9 @@ def p1_prolongation(mesh, space: Space) -> sp.csr_matrix:
     values = np.concatenate([np.ones(space.node_dofs.size), np.full(2 * edge_rows.size, 0.5)])
     return sp.csr_matrix((values, (rows, columns)), shape=(space.basis.N, space.basis.N))
 
+
+def __getattr__(name):
+    # 0.1 names that clashed with volspring's (volspring.statics, volspring.modes, volspring.assembly).
+    from volspring._deprecation import deprecated_alias
+
+    return deprecated_alias(__name__, name, {"stiffness_matrix": ("validation.fem_assembly.fem_stiffness_matrix", fem_stiffness_matrix)})

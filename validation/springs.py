@@ -1,14 +1,12 @@
 """The spring model's answer on a validation case: statics, frequencies, effective elastic constants.
 
-For a :class:`~validation.cases.Case` and a stiffness rule:
-
-- the static equilibrium (:func:`spring_static`), by :func:`volspring.statics.solve_static`
-  (Newton on the nonlinear springs) when every clamp holds whole nodes in place, or else (sliding
-  supports, prescribed displacements: :class:`volspring.Pins` holds whole nodes only) the
-  linearised solve K u = f with the rest stiffness, exact in the small-strain limit the cases
-  live in; tractions become node forces (:func:`traction_forces`);
-- the vibration frequencies (:func:`spring_frequencies`), ``eigsh`` of the rest stiffness with the
-  lumped masses, pinned dofs removed.
+Validation builds a volspring scene from a :class:`~validation.cases.Case` (:func:`case_scene`:
+clamps become supports, including sliding ones and prescribed displacements; tractions and
+gravity become forces) and asks volspring's own solvers: the static equilibrium
+(:func:`spring_static`, :func:`volspring.statics.solve_static`: Newton on the nonlinear model)
+and the vibration frequencies (:func:`spring_frequencies`, :func:`volspring.modes.solve_modes`).
+Whatever element sets the model carries (springs, volume terms) are therefore validated here
+without a line of validation code.
 
 Stiffness rules: ``van_gelder`` and ``lloyd`` from the material (:mod:`volspring.model`), and
 ``uniform`` with one constant for every spring, the mean Van Gelder constant of the same mesh
@@ -40,23 +38,26 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.sparse as sp
 
+from meshing.geometry import signed_tet_volumes, triangle_area_normals
+from meshing.mesh import TetMesh
 from validation.boundary import Box, Clamp
 from validation.cases import Case, check_held
-from volspring.assembly import stiffness_matrix
+from volspring.forces import Gravity, PointLoads
 from volspring.material import Material
-from volspring.mesh import TetMesh, signed_tet_volumes
-from volspring.model import SpringModel
-from volspring.scene import Gravity, Pins, Scene
+from volspring.model import Model
+from volspring.modes import solve_modes
+from volspring.scene import Scene
+from volspring.statics import solve_static
+from volspring.supports import Pins, Prescribed
 
 __all__ = [
-    "NodalLoad",
     "SpringStatic",
+    "case_scene",
+    "case_supports",
     "deformed_volume_change",
     "effective_constants",
     "held_nodes",
-    "rest_stiffness_matrix",
     "spring_frequencies",
     "spring_model",
     "spring_static",
@@ -64,8 +65,6 @@ __all__ = [
     "uniform_stiffness",
 ]
 
-#: Up to this many free dofs the spring eigenproblem is solved densely (all eigenvalues, exact).
-DENSE_EIGEN_DOFS = 1500
 #: Up to this many nodes the spring statics use sparse LU in the Newton steps, AMG + CG above.
 DIRECT_STATIC_NODES = 5000
 #: Target relative force residual of the nonlinear spring solve: far below the percent-level
@@ -76,24 +75,16 @@ STATIC_RTOL = 1e-7
 
 def uniform_stiffness(mesh: TetMesh, material: Material) -> float:
     """The constant of the ``uniform`` rule: the mean Van Gelder spring constant on this mesh [N/m]."""
-    return float(SpringModel.from_mesh(mesh, material, rule="van_gelder").stiffness.mean())
+    return float(Model.from_mesh(mesh, material, rule="van_gelder").stiffness.mean())
 
 
-def spring_model(mesh: TetMesh, material: Material, rule: str, **options) -> SpringModel:
+def spring_model(mesh: TetMesh, material: Material, rule: str, **options) -> Model:
     """The spring model of ``mesh`` by ``rule`` (``uniform``: :func:`uniform_stiffness`); options go to
-    :meth:`SpringModel.from_mesh` (e.g. ``damping_ratio``)."""
+    :meth:`Model.from_mesh` (e.g. ``damping_ratio``)."""
     if rule == "uniform":
-        return SpringModel.from_mesh(mesh, material, rule="uniform", stiffness=uniform_stiffness(mesh, material),
+        return Model.from_mesh(mesh, material, rule="uniform", stiffness=uniform_stiffness(mesh, material),
                                      **options)
-    return SpringModel.from_mesh(mesh, material, rule=rule, **options)
-
-
-def rest_stiffness_matrix(model: SpringModel) -> sp.csr_matrix:
-    """(3n, 3n) CSR -- K = -dF/dx of the springs at rest [N/m], dof 3 i + c.
-
-    At rest the transverse term k (1 - l0/l) of each block is zero: K is the sum of k r r^T blocks.
-    """
-    return stiffness_matrix(model)
+    return Model.from_mesh(mesh, material, rule=rule, **options)
 
 
 def traction_forces(mesh: TetMesh, tractions) -> np.ndarray:
@@ -111,30 +102,11 @@ def traction_forces(mesh: TetMesh, tractions) -> np.ndarray:
         loaded = faces[np.asarray(traction.region(mesh.points), bool)[faces].all(axis=1)]
         if len(loaded) == 0:
             raise ValueError(f"traction region {traction.region!r} contains no boundary face of the mesh")
-        x = mesh.points[loaded]
-        area = 0.5 * np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), axis=1)
+        area = 0.5 * np.linalg.norm(triangle_area_normals(mesh.points, loaded), axis=1)
         share = np.repeat(area / 3.0, 3)
         for c in range(3):
             forces[:, c] += np.bincount(loaded.ravel(), weights=share * traction.vector[c], minlength=mesh.node_count)
     return forces
-
-
-@dataclass(frozen=True, eq=False)
-class NodalLoad:
-    """Constant node forces as a scene force (tractions, point loads), with their potential.
-
-    Parameters
-    ----------
-    forces : (n, 3) float -- [N]
-    """
-
-    forces: np.ndarray
-
-    def accumulate(self, x, v, t, out):
-        out += self.forces
-
-    def potential_energy(self, x, t) -> float:
-        return float(-np.sum(self.forces * x))
 
 
 def _clamp_masks(mesh: TetMesh, clamps) -> tuple:
@@ -164,11 +136,31 @@ def held_nodes(case: Case) -> np.ndarray | None:
     return held
 
 
-def _loads(case: Case, model: SpringModel) -> np.ndarray:
-    forces = traction_forces(case.mesh, case.tractions)
+def case_supports(mesh: TetMesh, clamps) -> tuple:
+    """The clamps of a case as volspring supports, one per distinct set of held components.
+
+    Nodes held in all components at rest become :class:`~volspring.Pins`; the rest (sliding,
+    symmetry planes, prescribed displacements) :class:`~volspring.supports.Prescribed` at their
+    rest position plus the clamp's displacement. Where two clamps hold the same component of a
+    node the later one's displacement counts, as in the FEM reference.
+    """
+    fixed, values = _clamp_masks(mesh, clamps)
+    supports = []
+    for pattern in np.unique(fixed[fixed.any(axis=1)], axis=0):
+        nodes = np.flatnonzero((fixed == pattern).all(axis=1))
+        if pattern.all() and not values[nodes].any():
+            supports.append(Pins(nodes))
+        else:
+            supports.append(Prescribed.at(nodes, np.flatnonzero(pattern), mesh.points[nodes] + values[nodes]))
+    return tuple(supports)
+
+
+def case_scene(case: Case, model: Model) -> Scene:
+    """A volspring scene of the case: its clamps as supports, its tractions and gravity as forces."""
+    forces = [PointLoads(traction_forces(case.mesh, case.tractions))] if case.tractions else []
     if case.gravity is not None:
-        forces += model.masses[:, None] * np.asarray(case.gravity, float)
-    return forces
+        forces.append(Gravity(g=tuple(case.gravity)))
+    return Scene(model, forces=forces, supports=case_supports(case.mesh, case.clamps))
 
 
 @dataclass(frozen=True, eq=False)
@@ -182,70 +174,41 @@ class SpringStatic:
     seconds: float
 
 
-def spring_static(case: Case, model: SpringModel, *, method: str = "auto") -> SpringStatic:
-    """The spring model's static equilibrium under the case's clamps and loads.
+def spring_static(case: Case, model: Model, *, method: str = "auto") -> SpringStatic:
+    """The model's static equilibrium under the case's clamps and loads, by volspring's own solve.
 
     Parameters
     ----------
     case : Case
-    model : SpringModel -- of ``case.mesh``
-    method : {"auto", "newton", "linear"} -- ``newton``: :func:`volspring.statics.solve_static`;
-        ``linear``: K u = f with the rest stiffness; ``auto``: newton when the clamps hold whole nodes
+    model : Model -- of ``case.mesh`` (any element sets)
+    method : {"auto", "newton"} -- Newton on the nonlinear model (:func:`volspring.statics.solve_static`)
+        with sparse LU up to ``DIRECT_STATIC_NODES`` nodes and AMG-CG above; the linearised
+        solve of 0.1 is gone, as volspring's solve now holds sliding and prescribed supports
 
     Returns
     -------
     SpringStatic
     """
+    if method not in ("auto", "newton"):
+        raise ValueError(f"method = {method!r} is not 'auto' or 'newton' (the 'linear' spring solve was removed: "
+                         "volspring's static solve takes sliding supports and prescribed displacements)")
     start = time.perf_counter()
     held = held_nodes(case)
-    if method == "auto":
-        method = "linear" if held is None else "newton"
-    if method == "newton":
-        if held is None:
-            raise ValueError(f"case {case.name!r} has sliding supports or prescribed displacements, which "
-                             "volspring.Pins cannot hold; use method='linear'")
-        from volspring.statics import solve_static
-
+    if held is not None:
         check_held(case.mesh, held)
-        forces = [NodalLoad(traction_forces(case.mesh, case.tractions))] if case.tractions else []
-        if case.gravity is not None:
-            forces.append(Gravity(model.masses, tuple(case.gravity)))
-        scene = Scene(model, forces=forces, pins=Pins(np.flatnonzero(held)))
-        solver = "direct" if model.node_count <= DIRECT_STATIC_NODES else "amg"
-        result = solve_static(scene, rtol=STATIC_RTOL, solver=solver, clamp_compression=False)
-        return SpringStatic(result.x - model.rest_positions, "newton", result.iterations, result.residual,
-                            time.perf_counter() - start)
-    if method != "linear":
-        raise ValueError(f"method = {method!r} is not 'auto', 'newton' or 'linear'")
-    fixed, values = _clamp_masks(case.mesh, case.clamps)
-    K = rest_stiffness_matrix(model)
-    free = ~fixed.ravel()
-    rhs = _loads(case, model).ravel()[free] - K[free][:, ~free] @ values.ravel()[~free]
-    u = values.ravel().copy()
-    u[free] = _solve_spd(K[free][:, free], rhs)
-    residual = float(np.linalg.norm(K[free][:, free] @ u[free] - rhs) / max(np.linalg.norm(rhs), 1e-300))
-    return SpringStatic(u.reshape(-1, 3), "linear", 1, residual, time.perf_counter() - start)
+    solver = "direct" if model.node_count <= DIRECT_STATIC_NODES else "amg"
+    result = solve_static(case_scene(case, model), rtol=STATIC_RTOL, solver=solver, clamp_compression=False)
+    return SpringStatic(result.x - model.rest_positions, "newton", result.iterations, result.residual,
+                        time.perf_counter() - start)
 
 
-def _solve_spd(K, rhs):
-    from scipy.sparse.linalg import splu
-
-    try:
-        u = splu(K.tocsc()).solve(rhs)
-    except RuntimeError as error:  # "Factor is exactly singular"
-        raise ValueError(f"the spring stiffness matrix is singular ({error}): the supports leave a rigid "
-                         "motion free") from None
-    if not np.isfinite(u).all():
-        raise ValueError("the spring stiffness matrix is singular: the supports leave a rigid motion free")
-    return u
-
-
-def spring_frequencies(model: SpringModel, held: np.ndarray, *, count: int = 4) -> tuple:
-    """Lowest vibration frequencies of the spring model about its rest shape, held nodes fixed.
+def spring_frequencies(model: Model, held: np.ndarray, *, count: int = 4) -> tuple:
+    """Lowest vibration frequencies of the model about its rest shape, held nodes fixed
+    (:func:`volspring.modes.solve_modes`).
 
     Parameters
     ----------
-    model : SpringModel
+    model : Model
     held : (n,) bool -- pinned nodes
     count : int
 
@@ -254,24 +217,8 @@ def spring_frequencies(model: SpringModel, held: np.ndarray, *, count: int = 4) 
     frequencies : (count,) float -- ascending [Hz]
     shapes : (count, n, 3) float -- mass-normalised mode shapes, zero on held nodes
     """
-    K = rest_stiffness_matrix(model)
-    free = np.repeat(~held, 3)
-    K = K[free][:, free]
-    masses = np.repeat(model.masses, 3)[free]
-    if K.shape[0] <= DENSE_EIGEN_DOFS:
-        from scipy.linalg import eigh
-
-        values, vectors = eigh(K.toarray(), np.diag(masses), subset_by_index=[0, count - 1])
-    else:
-        from scipy.sparse.linalg import eigsh
-
-        start = np.random.default_rng(0).standard_normal(K.shape[0])  # seeded: ARPACK's own start is not
-        values, vectors = eigsh(K.tocsc(), k=count, M=sp.diags(masses).tocsc(), sigma=0.0, which="LM", v0=start)
-        order = np.argsort(values)
-        values, vectors = values[order], vectors[:, order]
-    shapes = np.zeros((count, 3 * model.node_count))
-    shapes[:, free] = vectors.T
-    return np.sqrt(np.clip(values, 0.0, None)) / (2 * np.pi), shapes.reshape(count, -1, 3)
+    modes = solve_modes(Scene(model, pins=Pins(np.asarray(held, bool))), count=count)
+    return modes.frequencies, modes.shapes
 
 
 def deformed_volume_change(mesh: TetMesh, displacement: np.ndarray) -> float:
@@ -280,17 +227,18 @@ def deformed_volume_change(mesh: TetMesh, displacement: np.ndarray) -> float:
 
 
 # ---------------------------------------------------------------------------- Cauchy limit
-def effective_constants(mesh: TetMesh, model: SpringModel, *, strain: float = 1e-3) -> dict:
+def effective_constants(mesh: TetMesh, model: Model, *, strain: float = 1e-3) -> dict:
     """Effective E and nu of a spring network filling a box, from a uniaxial stress test.
 
     The mesh's bounding box faces at the lowest x, y, z slide (one component held each); the face
-    at the highest x is moved to axial ``strain``; the lateral faces are free. Linearised (rest
-    stiffness), so the answer is the network's small-strain elastic constants.
+    at the highest x is moved to axial ``strain``; the lateral faces are free. Solved by
+    volspring's static solve at a small strain, so the answer is the network's small-strain
+    elastic constants (to O(strain)).
 
     Parameters
     ----------
     mesh : TetMesh -- a box (its faces lie on its bounding box)
-    model : SpringModel -- of ``mesh``
+    model : Model -- of ``mesh``
     strain : float -- axial strain [-]
 
     Returns
@@ -305,15 +253,12 @@ def effective_constants(mesh: TetMesh, model: SpringModel, *, strain: float = 1e
     top = Box.plane("x", high[0], tolerance=tolerance)
     clamps = [Clamp(plane, components=axis) for plane, axis in zip(planes, "xyz")]
     clamps.append(Clamp(top, components="x", displacement=(strain * size[0], 0.0, 0.0)))
-    fixed, values = _clamp_masks(mesh, clamps)
-    K = rest_stiffness_matrix(model)
-    free = ~fixed.ravel()
-    u = values.ravel().copy()
-    u[free] = _solve_spd(K[free][:, free], -(K[free][:, ~free] @ u[~free]))
-    reaction = (K @ u).reshape(-1, 3)
+    scene = Scene(model, supports=case_supports(mesh, clamps))
+    x = solve_static(scene, solver="direct", rtol=STATIC_RTOL, clamp_compression=False).x
+    reaction = -model.forces(x)  # what the supports push with, balancing the network
     on_top = top(mesh.points)
     E = float(reaction[on_top, 0].sum() / (size[1] * size[2] * strain))
-    u = u.reshape(-1, 3)
+    u = x - model.rest_positions
     lateral = [float(u[Box.plane(axis, high[a], tolerance=tolerance)(mesh.points), a].mean() / size[a])
                for a, axis in ((1, "y"), (2, "z"))]
     nu_y, nu_z = (-value / strain for value in lateral)

@@ -232,7 +232,8 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps=None, pe
     if not 0 < residual_amplitude < 1:
         raise ValueError(f"residual_amplitude = {residual_amplitude!r} is not in (0, 1)")
     from volspring.errors import SimulationDiverged
-    from volspring.scene import Drag, Gravity, Pins, Scene
+    from volspring.forces import Drag, Gravity
+    from volspring.scene import Pins, Scene
     from volspring.simulate import simulate
     from volspring.stability import critical_step, omega_max
 
@@ -261,7 +262,7 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps=None, pe
                                          count=4)
     settled_fem = tip_deflection(case, fem_static.displacement)
     frequency_fem = _bending_mode(fem_modes.frequencies, fem_modes.shapes, case.tip_nodes)
-    scene = Scene(model, forces=[Gravity(model.masses, tuple(case.gravity)), Drag(model.masses, drag_rate)],
+    scene = Scene(model, forces=[Gravity(g=tuple(case.gravity)), Drag(rate=drag_rate)],
                   pins=Pins(np.flatnonzero(held)))
     omega = omega_max(scene)
     base_step = 2.0 / omega

@@ -2,16 +2,24 @@
 
 from volspring.checkpoint import load_checkpoint, save_checkpoint
 from volspring.constraints import DistanceConstraints, HalfSpace, StrainLimit
-from volspring.fields import CallableForce, PointAttractor, PointRepulser, Vortex, Wind
+from volspring.forces import CallableForce, Drag, Gravity, PointAttractor, PointRepulser, Vortex, Wind
 from volspring.material import Material
-from volspring.mesh import TetMesh
-from volspring.model import FORCE_LAWS, STIFFNESS_RULES, SpringModel
+from meshing.mesh import TetMesh
+from volspring.model import FORCE_LAWS, STIFFNESS_RULES, Model
+from volspring.model_io import load_model, save_model
 from volspring.errors import SimulationDiverged, SolverNotConverged, StepTooLarge, StepTooLargeWarning
-from volspring.scene import Drag, Gravity, Pins, Scene, State
+from volspring.scene import Pins, Scene, State
 from volspring.simulate import SimulationResult, simulate
-from volspring.topology import SPRING_KINDS, SpringTopology
+from meshing.topology import SPRING_KINDS, SpringTopology
 
 __version__ = "0.1.0"
+
+
+def __getattr__(name):
+    from volspring._deprecation import deprecated_alias
+
+    return deprecated_alias(__name__, name, {"SpringModel": ("volspring.Model", Model)})
+
 
 __all__ = [
     "CallableForce",
@@ -35,11 +43,13 @@ __all__ = [
     "StepTooLargeWarning",
     "STIFFNESS_RULES",
     "Scene",
-    "SpringModel",
+    "Model",
     "SpringTopology",
     "State",
     "TetMesh",
     "load_checkpoint",
+    "load_model",
     "save_checkpoint",
+    "save_model",
     "simulate",
 ]

@@ -4,7 +4,7 @@ By default SIGTERM (``kill PID``, a job scheduler's or a container's stop) and S
 terminal closed) end a Python process on the spot: no ``finally`` block runs, temporary files
 stay behind, a run folder's manifest still says "running". Inside :func:`handle_termination`
 they raise :class:`Terminated` instead, which unwinds like Ctrl-C's ``KeyboardInterrupt``:
-:func:`volspring._io.atomic_path` removes its temporary file, a
+:func:`meshing._io.atomic_path` removes its temporary file, a
 :class:`volspring.output.RunFolder` is marked interrupted, and the command exits with the
 conventional status 128 + signal number (:func:`exit_status`: 143 for SIGTERM, 129 for SIGHUP,
 130 for Ctrl-C).
@@ -137,7 +137,7 @@ def handle_termination(signals=TERMINATION_SIGNALS):
     - Every signal raises, including one arriving while an earlier one unwinds: a ``kill`` is
       never lost, at the cost of a second ``kill`` in quick succession possibly cutting a
       clean-up short (the temporary file it leaves is removed by the next run's
-      :func:`volspring._io.remove_stale_temporaries`).
+      :func:`meshing._io.remove_stale_temporaries`).
     - A signal whose disposition is "ignore" when the block starts (``nohup`` ignores SIGHUP) stays
       ignored.
     - The handlers in place before the block are restored when it ends, however it ends.

@@ -31,13 +31,14 @@ import hashlib
 import io
 import json
 import logging
+import pickle
 import zipfile
 import zlib
 from pathlib import Path
 
 import numpy as np
 
-from volspring._io import atomic_path
+from meshing._io import atomic_path
 from volspring.scene import State
 
 __all__ = ["save_checkpoint", "load_checkpoint", "CheckpointMismatch", "model_fingerprint"]
@@ -74,13 +75,25 @@ def model_fingerprint(scene) -> dict:
     Returns
     -------
     dict -- part name ("rest positions", "springs", "rest lengths", "stiffness", "damping",
-        "masses", "pinned nodes") -> 16 hex digits of the SHA-256 of its bytes (dtype and shape
+        "masses", "pinned nodes", and where a scene has them "held components" and one entry per
+        element set besides the springs) -> 16 hex digits of the SHA-256 of its bytes (dtype and shape
         included), so equal digests mean bit-identical data
     """
     model = scene.model
     pins = np.zeros(0, dtype=np.int64) if scene.pins is None else scene.pins.nodes
     arrays = {"rest positions": model.rest_positions, "springs": model.springs, "rest lengths": model.rest_lengths,
               "stiffness": model.stiffness, "damping": model.damping, "masses": model.masses, "pinned nodes": pins}
+    # Parts that only exist in some scenes are listed only there, so older checkpoints still match.
+    if scene.supports:
+        arrays["held components"] = scene.held
+    if model.body_count > 1:
+        arrays["node body"] = model.node_body
+        arrays["body materials"] = np.array([[m.E, m.nu, m.density] if m is not None else [np.nan] * 3
+                                             for m in model.materials])
+    for index, element_set in enumerate(model.elements):
+        if element_set is not model.spring_elements:
+            arrays[f"elements[{index}] {type(element_set).__name__}"] = np.frombuffer(
+                pickle.dumps(element_set, protocol=5), dtype=np.uint8)
     digests = {}
     for name, array in arrays.items():
         array = np.ascontiguousarray(array)

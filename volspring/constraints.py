@@ -1,6 +1,8 @@
-"""Obstacles and position constraints projected after each step: half-spaces, distances, strain limits.
+"""Position constraints projected after each step: distances and strain limits.
 
-All three follow the scene's projection protocol (see :class:`volspring.Scene`):
+Both follow the scene's projection protocol (see :class:`volspring.Scene`), as does the obstacle
+:class:`~volspring.collision.obstacles.HalfSpace` (defined there, with the other obstacles, and
+still importable from here):
 ``project(x, v, x_start, t, dt, free)`` moves the free nodes' positions ``x`` and fixes their
 velocities ``v`` in place after a step from ``x_start``. Pinned nodes (``free`` False) never
 move: they count as infinitely heavy. Prescribed motion is :class:`volspring.Pins`' job.
@@ -21,125 +23,15 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
 
+from volspring.collision.obstacles import HalfSpace  # re-exported: volspring.constraints.HalfSpace keeps working
+
 __all__ = ["HalfSpace", "DistanceConstraints", "StrainLimit", "RelaxationReport", "constraint_colors"]
 
 logger = logging.getLogger(__name__)
-
-
-# ---------------------------------------------------------------------------- half-space
-@dataclass(frozen=True, eq=False)
-class HalfSpace:
-    """A rigid obstacle filling the half-space below a plane: ``(x - point) . normal < 0``.
-
-    After a step, every free node found below the plane is
-
-    1. projected onto it along the normal (its penetration depth removed);
-    2. if it approaches (v_n = v . n < 0), given the normal velocity -e v_n (e = ``restitution``;
-       0 is a perfectly inelastic contact, 1 a perfect bounce): a normal impulse per unit mass
-       dv_n = (1 + e) |v_n|;
-    3. slowed tangentially by Coulomb friction: the tangential speed |v_t| is reduced by
-       mu dv_n (mu = ``friction``), and to 0 if it is smaller (static friction). Its position is
-       moved back by dt times the velocity removed, so that position and velocity agree.
-
-    Over a step of resting contact on a plane tilted by theta, gravity gives dv_n = g cos(theta) dt
-    and dv_t = g sin(theta) dt, so the node sticks iff tan(theta) <= mu and otherwise slides with
-    acceleration g (sin(theta) - mu cos(theta)), exactly Coulomb's law. This is exact for
-    symplectic Euler (x_1 = x_0 + dt v_1) and for Verlet with the backward-difference velocity
-    (x_1 - x_0) / dt; integrators must pass their end-of-step velocity. A Verlet integrator that
-    ignored the corrected ``v`` would still get the friction (from the corrected x) but see every
-    contact as inelastic; volspring's rebuild their history from ``v`` and keep the restitution.
-
-    Parameters
-    ----------
-    point : (3,) float -- a point on the plane [m]
-    normal : (3,) float -- outward normal, pointing into the free side [-], normalised here
-    restitution : float -- e in [0, 1] (keyword-only)
-    friction : float -- Coulomb coefficient mu >= 0 (keyword-only)
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from volspring.constraints import HalfSpace
-    >>> ground = HalfSpace((0, 0, 0), (0, 0, 1), friction=0.5)
-    >>> x, v = np.array([[0.0, 0.0, -0.01]]), np.array([[1.0, 0.0, -1.0]])
-    >>> ground.project(x, v, np.zeros((1, 3)), 0.0, 0.01, np.ones(1, dtype=bool))
-    >>> x.round(6).tolist(), v.tolist()  # on the plane; tangential speed 1 - 0.5 * 1
-    ([[-0.005, 0.0, 0.0]], [[0.5, 0.0, 0.0]])
-    """
-
-    point: np.ndarray
-    normal: np.ndarray
-    restitution: float = field(default=0.0, kw_only=True)
-    friction: float = field(default=0.0, kw_only=True)
-
-    def __post_init__(self):
-        point = np.array(self.point, dtype=np.float64)
-        normal = np.array(self.normal, dtype=np.float64)
-        if point.shape != (3,) or not np.isfinite(point).all():
-            raise ValueError(f"point = {point.tolist()} is not a finite 3-vector [m]")
-        length = np.linalg.norm(normal) if normal.shape == (3,) else np.nan
-        if not (np.isfinite(length) and length > 0):
-            raise ValueError(f"normal = {normal.tolist()} is not a finite non-zero 3-vector")
-        if not (0.0 <= self.restitution <= 1.0):
-            raise ValueError(f"restitution = {self.restitution} is not in [0, 1]")
-        if not (math.isfinite(self.friction) and self.friction >= 0):
-            raise ValueError(f"friction = {self.friction} is not finite and >= 0")
-        normal = normal / length
-        for array in (point, normal):
-            array.setflags(write=False)
-        for name, value in (("point", point), ("normal", normal), ("restitution", float(self.restitution)),
-                            ("friction", float(self.friction))):
-            object.__setattr__(self, name, value)
-
-    def signed_distances(self, x) -> np.ndarray:
-        """(n,) float -- height of each node above the plane [m] (negative below)."""
-        return (x - self.point) @ self.normal
-
-    def contacts(self, points):
-        """Points below the plane, for penalty contact (``volspring.collision.ObstacleContactForce``).
-
-        Returns
-        -------
-        vertex : (k,) int -- indices of the points below the plane
-        depth : (k,) float -- how far below [m]
-        direction : (k, 3) float -- the way out (the normal)
-        closest : (k, 3) float -- nearest points on the plane [m]
-        face : (k,) int -- -1 (a plane has no faces)
-        """
-        points = np.asarray(points, dtype=np.float64)
-        height = self.signed_distances(points)
-        vertex = np.flatnonzero(height < 0)
-        depth = -height[vertex]
-        direction = np.broadcast_to(self.normal, (len(vertex), 3)).copy()
-        closest = points[vertex] + depth[:, None] * self.normal
-        return vertex, depth, direction, closest, np.full(len(vertex), -1, dtype=np.int64)
-
-    def project(self, x, v, x_start, t, dt, free) -> None:
-        depth = -self.signed_distances(x)
-        nodes = np.flatnonzero(free & (depth > 0))
-        if nodes.size == 0:
-            return
-        n = self.normal
-        x[nodes] += depth[nodes, None] * n
-        velocity = v[nodes]
-        normal_speed = velocity @ n
-        tangential = velocity - normal_speed[:, None] * n
-        approaching = normal_speed < 0
-        impulse = np.where(approaching, -(1.0 + self.restitution) * normal_speed, 0.0)  # dv_n >= 0
-        normal_speed = np.where(approaching, -self.restitution * normal_speed, normal_speed)
-        speed = np.linalg.norm(tangential, axis=1)
-        kept = np.zeros_like(speed)
-        moving = speed > self.friction * impulse
-        kept[moving] = 1.0 - self.friction * impulse[moving] / speed[moving]
-        removed = tangential * (1.0 - kept)[:, None]
-        v[nodes] = tangential - removed + normal_speed[:, None] * n
-        x[nodes] -= dt * removed
-        logger.debug("HalfSpace: %d node(s) in contact, deepest %.3g m", nodes.size, depth[nodes].max())
 
 
 # ---------------------------------------------------------------------------- colouring
@@ -367,7 +259,7 @@ class DistanceConstraints(_PairProjection):
 
         Parameters
         ----------
-        model : SpringModel
+        model : Model
         springs : (k,) int or (s,) bool, optional -- which springs to constrain (default all)
         iterations, stiffness, tolerance : as for the constructor
         """
@@ -390,7 +282,7 @@ class StrainLimit(_PairProjection):
 
     Parameters
     ----------
-    model : SpringModel
+    model : Model
     tau : float -- largest allowed stretch (l - l0) / l0 [-], > 0 (Provot used 0.1)
     compression : float, optional -- largest allowed shortening (l0 - l) / l0 [-], in (0, 1)
     iterations : int -- Gauss-Seidel sweeps per projection, >= 1 (keyword-only)
@@ -399,9 +291,9 @@ class StrainLimit(_PairProjection):
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import SpringModel
+    >>> from volspring import Model
     >>> from volspring.constraints import StrainLimit
-    >>> pair = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0)
+    >>> pair = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0)
     >>> x = np.array([[0.0, 0, 0], [1.5, 0, 0]])
     >>> _ = StrainLimit(pair, 0.1, iterations=1).relax(x)
     >>> float(np.linalg.norm(x[1] - x[0]))  # capped at 1.1 l0

@@ -1,13 +1,13 @@
 """Energies, momenta and centre of mass of a state: small functions of (scene or model, state).
 
-Each takes a :class:`Scene` or a :class:`SpringModel` (for the model-only quantities) and a
+Each takes a :class:`Scene` or a :class:`Model` (for the model-only quantities) and a
 :class:`State`. Energies are in J, momenta in kg m/s and kg m^2/s, positions in m.
 
 Examples
 --------
->>> from volspring import Scene, SpringModel
+>>> from volspring import Scene, Model
 >>> from volspring.diagnostics import kinetic_energy, linear_momentum
->>> pair = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 3.0], [[0, 1]], stiffness=10.0)
+>>> pair = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 3.0], [[0, 1]], stiffness=10.0)
 >>> state = Scene(pair).initial_state(v=[[2, 0, 0], [0, 0, 0]])
 >>> kinetic_energy(pair, state), linear_momentum(pair, state).tolist()
 (2.0, [2.0, 0.0, 0.0])
@@ -19,29 +19,30 @@ import numpy as np
 
 from typing import NamedTuple
 
-from volspring.mesh import signed_tet_volumes
-from volspring.model import SpringModel
-from volspring.scene import Gravity, Scene, State
+from meshing.geometry import signed_tet_volumes
+from volspring.model import Model
+from volspring.forces import Gravity
+from volspring.scene import Scene, State
 from volspring.springs import spring_energy as _spring_energy
 
 __all__ = ["kinetic_energy", "spring_energy", "gravitational_energy", "potential_energy", "total_energy",
            "linear_momentum", "angular_momentum", "centre_of_mass", "TetInversion", "tet_inversion"]
 
 
-def _model(system) -> SpringModel:
+def _model(system) -> Model:
     if isinstance(system, Scene):
         return system.model
-    if isinstance(system, SpringModel):
+    if isinstance(system, Model):
         return system
-    raise TypeError(f"expected a Scene or SpringModel, got {type(system).__name__}")
+    raise TypeError(f"expected a Scene or Model, got {type(system).__name__}")
 
 
 def _scene(system) -> Scene:
     if isinstance(system, Scene):
         return system
-    if isinstance(system, SpringModel):
+    if isinstance(system, Model):
         return Scene(system)
-    raise TypeError(f"expected a Scene or SpringModel, got {type(system).__name__}")
+    raise TypeError(f"expected a Scene or Model, got {type(system).__name__}")
 
 
 def kinetic_energy(system, state: State) -> float:
@@ -56,9 +57,10 @@ def spring_energy(system, state: State) -> float:
 
 def gravitational_energy(system, state: State) -> float:
     """Potential of the scene's :class:`Gravity` forces, -sum m_i g . x_i [J] (0 for a bare model)."""
-    if isinstance(system, SpringModel):
+    if isinstance(system, Model):
         return 0.0
-    return float(sum(force.potential_energy(state.x, state.t) for force in _scene(system).forces
+    scene = _scene(system)
+    return float(sum(force.potential_energy(scene.model, state.x, state.t) for force in scene.forces
                      if isinstance(force, Gravity)))
 
 
@@ -115,7 +117,7 @@ def tet_inversion(system, x) -> TetInversion:
 
     Parameters
     ----------
-    system : Scene or SpringModel
+    system : Scene or Model
     x : (n, 3) float -- node positions [m]
 
     Returns
@@ -125,9 +127,9 @@ def tet_inversion(system, x) -> TetInversion:
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import Material, SpringModel, TetMesh
+    >>> from volspring import Material, Model, TetMesh
     >>> mesh = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
-    >>> model = SpringModel.from_mesh(mesh, Material(1e6, 0.3, 1000.0))
+    >>> model = Model.from_mesh(mesh, Material(1e6, 0.3, 1000.0))
     >>> flipped = model.rest_positions * [1, 1, -1]   # mirrored: the tet is inside out
     >>> tet_inversion(model, flipped)
     TetInversion(count=1, worst_volume_ratio=-1.0, tet_count=1)

@@ -2,92 +2,32 @@
 
 A model is static data. Build it from a tet mesh (or a :class:`SpringTopology` with shells)
 and a :class:`Material`, where masses come from density x volume and stiffness from a
-published rule, or directly from arrays for strings, custom networks and tests.
+published rule, directly from arrays for strings, custom networks and tests, or from several
+placed bodies (:meth:`Model.from_bodies`; :mod:`volspring.bodies`). One type holds one body or
+many: ``node_body`` gives the body of every node, ``materials`` the material of every body.
 
-Stiffness rules (``rule=``), per tet edge e, summed over the tets t that contain e:
-
-``van_gelder``
-    k_e = sum_t E V_t / l_e^2 (Van Gelder, "Approximate simulation of elastic membranes by
-    triangulated spring meshes", JGT 3(2), 1998, 3D form).
-``lloyd``
-    k_e = sum_t (2 sqrt(2) / 25) E l_t with l_t = (6 sqrt(2) V_t)^(1/3), the edge length of the
-    regular tet of volume V_t (Lloyd, Szekely, Harders, IEEE TVCG 13(5), 2007). A least-squares
-    fit of six springs to one linear tet's FEM stiffness gives this exactly at nu = 1/4.
-``uniform``
-    k_e = ``stiffness`` for every spring: a raw constant, for comparisons with tools that take one.
-
-Whatever the rule, a network of central springs behaves as an isotropic solid only with
-lambda = mu, i.e. nu = 1/4 (the Cauchy limit): the material's nu is not reproduced.
-
-Virtual shells. Between shell layer k-1 and k every shell triangle spans a prism of volume
-V_p. Each spring of the prism (the 3 top edges, 3 straight and 6 diagonal springs) gets the
-rule's contribution from V_p as if it were a tet of that volume (E V_p / l^2 for
-``van_gelder``, (2 sqrt(2)/25) E (6 sqrt(2) V_p)^(1/3) for ``lloyd``), and the prism's mass
-density x V_p goes in thirds to its 3 top nodes. The body's own nodes keep exactly the mass of
-their tets, so the real body weighs density x mesh volume with or without shells.
-
-Damping. ``damping_ratio`` zeta gives each spring k_d = 2 zeta sqrt(k_e m_ij), critical
-damping of the two-body oscillator with reduced mass m_ij = m_i m_j / (m_i + m_j);
-``damping`` gives k_d [N s/m] directly.
-
-Force laws (``law=``) say how a raw constant is read: ``hooke`` f = k (l - l0) with k in N/m,
-``strain`` f = k (l - l0) / l0 with k in N (the seed's strain form). The model stores the
-effective linear stiffness k_e [N/m] either way; material rules give k_e directly.
+How the springs' constants and the masses come from a mesh and a material (the stiffness rules,
+virtual shells, damping, force laws) is :mod:`volspring.elements.spring_rules`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
+from volspring._deprecation import deprecated_alias
+from volspring.bodies import checked_body_fields
+from volspring.elements import ElementSet, Springs
+from volspring.elements.spring_rules import FORCE_LAWS, STIFFNESS_RULES, _effective_stiffness, springs_from_topology
+from volspring.elements.springs import checked_pairs, per_item_array
 from volspring.material import Material, _real_array, _real_number, _shown
-from volspring.mesh import TetMesh
-from volspring.topology import SPRING_KINDS, SpringTopology, vector_lengths
+from meshing.mesh import TetMesh
+from meshing.topology import SPRING_KINDS, SpringTopology, vector_lengths
 
-__all__ = ["STIFFNESS_RULES", "FORCE_LAWS", "SpringModel"]
-
-STIFFNESS_RULES = ("van_gelder", "lloyd", "uniform")
-#: Rules that build pure springs from E alone: they cannot honour a Poisson ratio (the Cauchy limit).
-NU_IGNORING_RULES = STIFFNESS_RULES
-FORCE_LAWS = ("hooke", "strain")
-
-
-def _rule_stiffness(rule, E, volumes, lengths):
-    """Per-(element, spring) contribution of one stiffness rule [N/m]."""
-    if rule == "van_gelder":
-        return E * volumes / lengths**2
-    if rule == "lloyd":
-        return (2.0 * np.sqrt(2.0) / 25.0) * E * np.cbrt(6.0 * np.sqrt(2.0) * volumes)
-    raise ValueError(f"unknown stiffness rule {rule!r}; known: {', '.join(STIFFNESS_RULES)}")
-
-
-def _pair_index(springs, node_count, pairs):
-    """Index into ``springs`` of each (a, b) in ``pairs`` (either order); -1 where absent."""
-    keys = springs.min(axis=1) * node_count + springs.max(axis=1)
-    order = np.argsort(keys)
-    query = pairs.min(axis=1) * node_count + pairs.max(axis=1)
-    where = np.minimum(np.searchsorted(keys, query, sorter=order), len(keys) - 1)
-    found = order[where]
-    return np.where(keys[found] == query, found, -1)
-
-
-def _as_spring_array(name, value, count, *, allow_zero):
-    """(count,) float -- a number or array of numbers broadcast to one per spring (or node), checked."""
-    array = _real_array(name, value)
-    try:
-        array = np.broadcast_to(array, (count,)).copy()
-    except ValueError:
-        raise ValueError(f"{name} has shape {array.shape}; expected a number or shape ({count},)") from None
-    bad = ~np.isfinite(array) | (array < 0) | ((array == 0) & (not allow_zero))
-    if bad.any():
-        first = np.flatnonzero(bad)[0]
-        expected = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name}[{first}] = {array[first]} is not finite and {expected}")
-    return array
-
+__all__ = ["STIFFNESS_RULES", "FORCE_LAWS", "Model"]
 
 def _checked_positions(name, value) -> np.ndarray:
     """(n, 3) float -- finite node positions [m], n > 0."""
@@ -102,105 +42,87 @@ def _checked_positions(name, value) -> np.ndarray:
     return x
 
 
-def _checked_springs(springs, node_count) -> np.ndarray:
-    """(s, 2) int64 -- node pairs: integers in [0, node_count), each joining two different nodes."""
-    try:
-        array = np.asarray(springs)
-    except ValueError as error:  # ragged nested sequences
-        raise ValueError(f"springs = {_shown(springs)} is not a regular (s, 2) array: {error}") from None
-    if array.size == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    if array.dtype.kind not in "iu":
-        raise TypeError(f"springs have dtype {array.dtype}; expected integer node indices (first pair "
-                        f"{array.reshape(-1)[:2].tolist()}; integer-valued floats convert with "
-                        "np.asarray(springs, dtype=int))")
-    if array.ndim != 2 or array.shape[1] != 2:
-        raise ValueError(f"springs have shape {array.shape}; expected (s, 2), one node pair per spring "
-                         "(e.g. [[0, 1]] for one spring)")
-    array = array.astype(np.int64)
-    outside = ((array < 0) | (array >= node_count)).any(axis=1)
-    if outside.any():
-        e = int(np.flatnonzero(outside)[0])
-        raise ValueError(f"springs[{e}] = {array[e].tolist()} indexes a node outside [0, {node_count - 1}] "
-                         f"(the model has {node_count} nodes; {int(outside.sum())} spring(s) affected)")
-    loops = array[:, 0] == array[:, 1]
-    if loops.any():
-        e = int(np.flatnonzero(loops)[0])
-        raise ValueError(f"springs[{e}] = {array[e].tolist()} joins node {array[e, 0]} to itself; "
-                         "expected two different nodes")
-    return array
-
-
 @dataclass(frozen=True, eq=False)
-class SpringModel:
-    """Immutable mass-spring network.
+class Model:
+    """Immutable soft-body model: rest shape, lumped masses and element sets (springs, and whatever
+    other internal physics it is given).
 
     Parameters
     ----------
     rest_positions : (n, 3) float -- rest positions of the nodes [m]
     masses : (n,) float -- lumped node masses [kg], > 0
-    springs : (s, 2) int -- node pairs joined by a spring
-    stiffness : (s,) float -- effective linear stiffness k_e [N/m]
-    damping : (s,) float -- damper coefficient k_d along each spring [N s/m]
-    rest_lengths : (s,) float -- rest lengths [m], > 0
-    kinds : (s,) int -- index into ``SPRING_KINDS`` (all ``tet_edge`` when built from arrays)
-    topology : SpringTopology or None -- where the model came from, if from a mesh
-    material : Material or None
-    rule : str -- the stiffness rule used, or "arrays"
+    elements : sequence of ElementSet -- the internal forces (:mod:`volspring.elements`); at most
+        one :class:`~volspring.elements.Springs`
+    topology : SpringTopology or None -- where the model came from, if from a mesh (for several
+        bodies, its mesh is the union of their placed tet meshes)
+    material : Material or None -- the material of every body; None when bodies differ (or none given)
+    rule : str -- the stiffness rule used, "arrays", or "mixed" (bodies with different rules)
+    node_body : (n,) int, optional -- body id of every node, 0 to b - 1; default all 0 (one body)
+    materials : sequence of Material or None, optional -- one per body; default ``(material,)``
+        for every body
+    body_names : sequence of str, optional -- one per body; default all ""
 
-    Use :meth:`from_mesh` or :meth:`from_arrays` rather than the constructor. All three refuse
-    input they would misread: a TypeError for what is not numbers (bools, strings; numpy
-    scalars are numbers) or for non-integer spring indices, a ValueError for wrong shapes,
-    non-finite values, masses <= 0, negative stiffness or damping, rest lengths <= 0, and
-    springs that leave the node range or join a node to itself, naming the first offender.
+    Use :meth:`from_mesh`, :meth:`from_arrays` or :meth:`from_bodies` rather than the constructor,
+    and :meth:`with_elements` to add element sets. All refuse input they would misread: a TypeError
+    for what is not numbers (bools, strings; numpy scalars are numbers) or for non-integer spring
+    indices or body ids, a ValueError for wrong shapes, non-finite values, masses <= 0, negative
+    stiffness or damping, rest lengths <= 0, springs that leave the node range or join a node to
+    itself, a ``node_body`` of the wrong length, a body with no node, ``materials`` or
+    ``body_names`` not one per body, naming the first offender.
+
+    The springs' arrays are reachable directly (``model.springs`` (s, 2), ``model.stiffness``,
+    ``model.damping``, ``model.rest_lengths``, ``model.kinds``; empty without springs).
 
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import SpringModel
-    >>> pair = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0)
+    >>> from volspring import Model
+    >>> pair = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0)
     >>> pair.spring_count, float(pair.rest_lengths[0])
     (1, 1.0)
     """
 
     rest_positions: np.ndarray
     masses: np.ndarray
-    springs: np.ndarray
-    stiffness: np.ndarray
-    damping: np.ndarray
-    rest_lengths: np.ndarray
-    kinds: np.ndarray
+    elements: tuple = ()
     topology: SpringTopology | None = None
     material: Material | None = None
     rule: str = "arrays"
+    node_body: np.ndarray | None = None
+    materials: tuple | None = None
+    body_names: tuple | None = None
 
     def __post_init__(self):
         x = _checked_positions("rest_positions", self.rest_positions)
         n = len(x)
-        springs = _checked_springs(self.springs, n)
-        s = len(springs)
         masses = _real_array("masses", self.masses).ravel()
         if masses.shape != (n,):
             raise ValueError(f"len(rest_positions) = {n}, but masses have shape {masses.shape}")
-        masses = _as_spring_array("masses", masses, n, allow_zero=False)
-        values = {
-            "stiffness": _as_spring_array("stiffness", self.stiffness, s, allow_zero=True),
-            "damping": _as_spring_array("damping", self.damping, s, allow_zero=True),
-            "rest_lengths": _as_spring_array("rest_lengths", self.rest_lengths, s, allow_zero=False),
-        }
-        kinds = np.broadcast_to(np.asarray(self.kinds, dtype=np.int8), (s,)).copy()
-        if s and (kinds.min() < 0 or kinds.max() >= len(SPRING_KINDS)):
-            raise ValueError(f"kinds hold {kinds.min()} to {kinds.max()}; expected indices into SPRING_KINDS, "
-                             f"0 to {len(SPRING_KINDS) - 1}")
-        for name, array in (("rest_positions", x), ("masses", masses), ("springs", springs), ("kinds", kinds),
-                            *values.items()):
+        masses = per_item_array("masses", masses, n, allow_zero=False)
+        if isinstance(self.elements, ElementSet):
+            raise TypeError(f"elements is a single {type(self.elements).__name__}; expected a sequence, "
+                            "e.g. elements=[springs]")
+        elements = tuple(self.elements)
+        for index, element_set in enumerate(elements):
+            if not isinstance(element_set, ElementSet):
+                raise TypeError(f"elements[{index}] = {_shown(element_set)} is not a volspring ElementSet")
+            element_set.check(n)
+        if sum(isinstance(element_set, Springs) for element_set in elements) > 1:
+            raise ValueError("a model takes at most one Springs element set; join the pairs into one")
+        for name, array in (("rest_positions", x), ("masses", masses)):
             array.setflags(write=False)
             object.__setattr__(self, name, array)
+        object.__setattr__(self, "elements", elements)
+        node_body, materials, body_names, material = checked_body_fields(
+            self.node_body, self.materials, self.body_names, self.material, n)
+        for name, value in (("node_body", node_body), ("materials", materials), ("body_names", body_names),
+                            ("material", material)):
+            object.__setattr__(self, name, value)
 
     # ------------------------------------------------------------------ constructors
     @classmethod
     def from_arrays(cls, positions, masses, springs, *, stiffness, damping=0.0, rest_lengths=None,
-                    law="hooke") -> "SpringModel":
+                    law="hooke") -> "Model":
         """A model from raw arrays (strings, custom networks, tests).
 
         Parameters
@@ -222,7 +144,7 @@ class SpringModel:
             position without ``rest_lengths`` (its rest length would be 0), naming the spring.
         """
         positions = _checked_positions("positions", positions)
-        springs = _checked_springs(springs, len(positions))
+        springs = checked_pairs(springs, len(positions))
         if law not in FORCE_LAWS:
             raise ValueError(f"unknown force law {law!r}; known: {', '.join(FORCE_LAWS)}")
         if rest_lengths is None:
@@ -234,14 +156,14 @@ class SpringModel:
                                  f"{positions[i].tolist()} m: its rest length would be 0; expected distinct "
                                  "positions, or rest_lengths > 0")
         else:
-            rest_lengths = _as_spring_array("rest_lengths", rest_lengths, len(springs), allow_zero=False)
-        stiffness = _as_spring_array("stiffness", stiffness, len(springs), allow_zero=True)
+            rest_lengths = per_item_array("rest_lengths", rest_lengths, len(springs), allow_zero=False)
+        stiffness = per_item_array("stiffness", stiffness, len(springs), allow_zero=True)
         stiffness = _effective_stiffness(stiffness, rest_lengths, law)
-        return cls(positions, masses, springs, stiffness, damping, rest_lengths, kinds=0)
+        return cls(positions, masses, (Springs(len(positions), springs, stiffness, damping, rest_lengths, 0),))
 
     @classmethod
     def from_mesh(cls, body, material: Material, *, rule="van_gelder", stiffness=None, law="hooke",
-                  damping_ratio=None, damping=None) -> "SpringModel":
+                  damping_ratio=None, damping=None) -> "Model":
         """A model from a tet mesh (or a topology with shells) and a material.
 
         Parameters
@@ -282,114 +204,152 @@ class SpringModel:
             if not np.isfinite(damping_ratio) or damping_ratio < 0:
                 raise ValueError(f"damping_ratio = {damping_ratio} is not finite and >= 0")
 
-        mesh, n = topology.mesh, topology.node_count
-        springs, lengths = topology.springs, topology.rest_lengths
-        masses = np.zeros(n)
-        masses[: mesh.node_count] = material.density * mesh.node_volumes()
-        k = np.zeros(len(springs))
-        if rule == "uniform":
-            k[:] = _effective_stiffness(np.full(len(springs), stiffness), lengths, law)
-        else:
-            edge_of_spring = _pair_index(springs, n, mesh.edges)
-            if (edge_of_spring < 0).any():
-                raise ValueError("the topology lacks springs for some tet edges")
-            tet_edges = edge_of_spring[mesh.tet_edge_index]  # (m, 6) spring index of each tet edge
-            contributions = _rule_stiffness(rule, material.E, np.repeat(mesh.tet_volumes, 6),
-                                            lengths[tet_edges.ravel()])
-            k += np.bincount(tet_edges.ravel(), weights=contributions, minlength=len(springs))
-        if topology.shell_node_count:
-            prism_springs, prism_volumes, prism_tops = _shell_prisms(topology)
-            masses += np.bincount(prism_tops.ravel(), weights=np.repeat(material.density * prism_volumes / 3, 3),
-                                  minlength=n)
-            if rule != "uniform":
-                contributions = _rule_stiffness(rule, material.E, np.repeat(prism_volumes, 12),
-                                                lengths[prism_springs.ravel()])
-                k += np.bincount(prism_springs.ravel(), weights=contributions, minlength=len(springs))
-        if (masses <= 0).any():
-            raise ValueError(f"{(masses <= 0).sum()} node(s) got no mass (shell nodes in no shell triangle?)")
-        if damping_ratio is not None:
-            m_i, m_j = masses[springs[:, 0]], masses[springs[:, 1]]
-            damping = 2.0 * damping_ratio * np.sqrt(k * m_i * m_j / (m_i + m_j))
-        return cls(topology.points, masses, springs, k, 0.0 if damping is None else damping, lengths,
-                   topology.kinds, topology=topology, material=material, rule=rule)
+        masses, spring_set = springs_from_topology(topology, material, rule=rule, stiffness=stiffness, law=law,
+                                                   damping_ratio=damping_ratio, damping=damping)
+        return cls(topology.points, masses, (spring_set,), topology=topology, material=material, rule=rule)
 
-    # ------------------------------------------------------------------ sizes and derived data
+    @classmethod
+    def from_bodies(cls, bodies) -> "Model":
+        """One model from several placed bodies (:class:`volspring.bodies.Body`).
+
+        Each body is built with :meth:`from_mesh` and placed; the result has ``node_body``,
+        ``materials`` and ``body_names`` set, and its topology's mesh is the union of the placed
+        meshes: the mesh nodes of every body first, body after body, then the shell nodes
+        (:mod:`volspring.bodies`). The bodies' initial motion is not part of the model: pass
+        ``volspring.bodies.initial_velocities(bodies, model)`` to ``scene.initial_state(v=...)``.
+
+        Parameters
+        ----------
+        bodies : sequence of Body
+
+        Raises
+        ------
+        TypeError
+            For an item that is not a Body, naming its index.
+        ValueError
+            For no bodies, a translation or velocity that is not 3 finite numbers, a rotation that
+            is not proper; and whatever :meth:`from_mesh` refuses.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from meshing import TetMesh
+        >>> from volspring import Material, Model
+        >>> from volspring.bodies import Body
+        >>> tet = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
+        >>> rubber = Material(E=1e5, nu=0.3, density=1000.0)
+        >>> model = Model.from_bodies([Body(tet, rubber), Body(tet, rubber, translation=(2, 0, 0))])
+        >>> model.body_count, model.body_nodes(1).tolist(), model.material is rubber
+        (2, [4, 5, 6, 7], True)
+        """
+        from volspring.bodies import assemble
+
+        return assemble(cls, bodies)
+
+    # ------------------------------------------------------------------ element sets
+    def with_elements(self, *element_sets) -> "Model":
+        """A copy with more element sets (e.g. a volume term), everything else shared."""
+        return replace(self, elements=self.elements + element_sets)
+
+    @cached_property
+    def spring_elements(self) -> Springs:
+        """The model's :class:`~volspring.elements.Springs` (an empty set when it has none)."""
+        for element_set in self.elements:
+            if isinstance(element_set, Springs):
+                return element_set
+        return Springs(self.node_count, np.zeros((0, 2), dtype=np.int64), 0.0, 0.0, 1.0, 0)
+
+    def forces(self, x, v=None) -> np.ndarray:
+        """(n, 3) float -- internal forces of all element sets at positions x [m] (and velocities v [m/s],
+        for the dampers) [N]."""
+        if not self.elements:
+            return np.zeros((self.node_count, 3))
+        total = self.elements[0].forces(x, v)
+        for element_set in self.elements[1:]:
+            total += element_set.forces(x, v)
+        return total
+
+    def energy(self, x) -> float:
+        """Potential energy of all element sets at positions x [J]."""
+        return float(sum(element_set.energy(x) for element_set in self.elements))
+
+    # ------------------------------------------------------------------ sizes and the springs' arrays
     @property
     def node_count(self) -> int:
         return len(self.rest_positions)
 
     @property
-    def spring_count(self) -> int:
-        return len(self.springs)
-
-    @property
     def total_mass(self) -> float:
         return float(self.masses.sum())
 
+    @property
+    def body_count(self) -> int:
+        """b, the number of bodies (``len(materials)``)."""
+        return len(self.materials)
+
+    def body_nodes(self, body: int) -> np.ndarray:
+        """(k,) int64 -- the nodes of one body, ascending (from :meth:`from_bodies`: mesh nodes, then shell nodes)."""
+        if not 0 <= body < self.body_count:
+            raise ValueError(f"body = {body} is not a body id in [0, {self.body_count - 1}]")
+        return np.flatnonzero(self.node_body == body)
+
     @cached_property
+    def body_masses(self) -> np.ndarray:
+        """(b,) float -- mass of each body [kg]."""
+        masses = np.bincount(self.node_body, weights=self.masses, minlength=self.body_count)
+        masses.setflags(write=False)
+        return masses
+
+    @property
+    def springs(self) -> np.ndarray:
+        """(s, 2) int -- node pairs of the springs."""
+        return self.spring_elements.pairs
+
+    @property
+    def stiffness(self) -> np.ndarray:
+        """(s,) float -- effective linear stiffness k_e of each spring [N/m]."""
+        return self.spring_elements.stiffness
+
+    @property
+    def damping(self) -> np.ndarray:
+        """(s,) float -- damper coefficient k_d of each spring [N s/m]."""
+        return self.spring_elements.damping
+
+    @property
+    def rest_lengths(self) -> np.ndarray:
+        """(s,) float -- rest length of each spring [m]."""
+        return self.spring_elements.rest_lengths
+
+    @property
+    def kinds(self) -> np.ndarray:
+        """(s,) int -- index into ``SPRING_KINDS`` of each spring."""
+        return self.spring_elements.kinds
+
+    @property
+    def spring_count(self) -> int:
+        return self.spring_elements.spring_count
+
+    @property
     def incidence(self) -> sp.csr_matrix:
-        """(n, s) sparse -- +1 at (i, e) and -1 at (j, e) for spring e = (i, j).
+        """(n, s) sparse -- see :attr:`volspring.elements.Springs.incidence`."""
+        return self.spring_elements.incidence
 
-        ``incidence @ f`` scatters per-spring forces on i, shape (s, 3), to node forces (n, 3).
-        """
-        s = self.spring_count
-        rows = self.springs.T.ravel()
-        values = np.concatenate([np.ones(s), -np.ones(s)])
-        return sp.csr_matrix((values, (rows, np.tile(np.arange(s), 2))), shape=(self.node_count, s))
-
-    @cached_property
+    @property
     def difference(self) -> sp.csr_matrix:
-        """(s, n) sparse -- -1 at (e, i) and +1 at (e, j): ``difference @ x`` is x_j - x_i per spring.
-
-        A sparse product gathers the spring vectors several times faster than fancy indexing.
-        """
-        return (-self.incidence.T).tocsr()
+        """(s, n) sparse -- see :attr:`volspring.elements.Springs.difference`."""
+        return self.spring_elements.difference
 
     def kind_counts(self) -> dict:
         counts = np.bincount(self.kinds, minlength=len(SPRING_KINDS))
         return {name: int(count) for name, count in zip(SPRING_KINDS, counts)}
 
     def __repr__(self) -> str:
-        return (f"SpringModel({self.node_count} nodes, {self.spring_count} springs, rule={self.rule!r}, "
+        others = "".join(f", {type(e).__name__} x {e.element_count}" for e in self.elements if not isinstance(e, Springs))
+        bodies = f", {self.body_count} bodies" if self.body_count > 1 else ""
+        return (f"Model({self.node_count} nodes{bodies}, {self.spring_count} springs{others}, rule={self.rule!r}, "
                 f"mass {self.total_mass:.6g} kg)")
 
 
-def _effective_stiffness(k, rest_lengths, law):
-    if law == "hooke":
-        return k
-    if law == "strain":
-        return k / rest_lengths
-    raise ValueError(f"unknown force law {law!r}; known: {', '.join(FORCE_LAWS)}")
-
-
-def _shell_prisms(topology):
-    """Prisms between consecutive shell layers.
-
-    Returns
-    -------
-    springs : (p, 12) int -- spring index of each prism's 3 top edges, 3 straight and 6 diagonal springs
-    volumes : (p,) float -- prism volumes [m^3]
-    tops : (p, 3) int -- the prism's top-layer nodes
-    """
-    n = topology.node_count
-    straight = topology.springs[topology.kinds == SPRING_KINDS.index("shell")]
-    layer = topology.shell_layer
-    child = np.where(layer[straight[:, 0]] > layer[straight[:, 1]], straight[:, 0], straight[:, 1])
-    parent_of = np.full(n, -1)
-    parent_of[child] = straight.sum(axis=1) - child
-    top = topology.shell_triangles
-    bottom = parent_of[top]
-    if (bottom < 0).any():
-        raise ValueError("a shell triangle has a node with no straight spring to the layer below")
-    a0, b0, c0 = bottom.T
-    a1, b1, c1 = top.T
-    pairs = np.stack([(a1, b1), (b1, c1), (c1, a1), (a0, a1), (b0, b1), (c0, c1),
-                      (a0, b1), (b0, a1), (b0, c1), (c0, b1), (c0, a1), (a0, c1)], axis=1)  # (2, 12, p)
-    springs = _pair_index(topology.springs, n, pairs.reshape(2, -1).T).reshape(12, -1).T
-    if (springs < 0).any():
-        raise ValueError("a shell prism lacks one of its 12 springs (top edges, straight or diagonal)")
-    x = topology.points
-    split = [(a0, b0, c0, a1), (b0, c0, a1, b1), (c0, a1, b1, c1)]
-    volumes = sum(np.abs(np.einsum("ij,ij->i", x[q] - x[p], np.cross(x[r] - x[p], x[s] - x[p]))) / 6
-                  for p, q, r, s in split)
-    return springs, volumes, top
+def __getattr__(name):
+    # SpringModel was the name of Model before it took element sets other than springs (0.1.0).
+    return deprecated_alias(__name__, name, {"SpringModel": ("volspring.Model", Model)})

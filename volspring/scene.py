@@ -1,20 +1,14 @@
-"""A scene: a spring model plus exactly the forces, pins and obstacles it asks for, and the state.
+"""A scene: a model plus exactly the forces, pins and obstacles it asks for, and the state.
 
 The data path is ``Scene(model, forces=..., pins=...)`` -> ``scene.initial_state()`` ->
 ``integrator.step(scene, state, dt)`` -> next ``State``. The scene is static; the state changes.
 
-A *force* is any object with
-
-``accumulate(x, v, t, out)``
-    add its forces [N], shape (n, 3), into ``out``;
-
-and optionally
-
-``jacobian(x, v, t) -> (dF_dx, dF_dv)``
-    each a (3n, 3n) scipy sparse matrix or None, for the implicit integrator
-    (a force without it is treated explicitly there);
-``potential_energy(x, t) -> float``
-    its potential [J], for energy diagnostics (forces without one are non-conservative).
+Forces follow the protocol of :mod:`volspring.forces.protocol` (``accumulate(model, x, v, t,
+out)``, optional ``jacobian`` and ``potential_energy``). The scene owns the algebra: total
+force (:meth:`Scene.forces_at`: the model's element sets plus the external forces), the
+external forces' Jacobian (:meth:`Scene.external_jacobian`) and the potential energy
+(:meth:`Scene.potential_energy`). Integrators, statics and diagnostics call these and never
+loop over forces themselves.
 
 Input is checked where it enters: constructors refuse what is not numbers (TypeError) and numbers
 of the wrong shape, range or finiteness (ValueError), naming the value; a scene refuses pins and
@@ -27,17 +21,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from typing import Callable
 
 import numpy as np
-import scipy.sparse as sp
 
-from volspring.fields import PointAttractor, Vortex, Wind, _masses, _vector
+from volspring.forces import HasJacobian, HasPotential, as_force
+from volspring.forces._checks import MassProportional
 from volspring.material import _real_array, _real_number, _shown
-from volspring.model import SpringModel
-from volspring.springs import spring_energy, spring_forces
+from volspring.supports import Pins, Prescribed, Sliding
+from volspring.model import Model
 
-__all__ = ["State", "Pins", "Gravity", "Drag", "Scene"]
+__all__ = ["State", "Pins", "Scene"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,217 +59,24 @@ class State:
 
 
 @dataclass(frozen=True, eq=False)
-class Pins:
-    """Nodes whose motion is prescribed exactly: held at rest, or moved by ``motion``.
-
-    Parameters
-    ----------
-    nodes : (p,) int or (n,) bool
-        Pinned node indices (Python or numpy integers, >= 0), or a boolean mask with one entry
-        per node of the model (``rest_positions[:, 0] == 0``), converted to the indices of its
-        True entries. Floats are refused, integer-valued or not: ``np.asarray(nodes, dtype=int)``
-        converts e.g. what ``np.loadtxt`` read. Indices beyond the model are refused by
-        :class:`Scene`, which also checks a mask's length.
-    motion : callable, optional
-        ``motion(t) -> (p, 3)`` positions [m] at time t [s], row k for ``nodes[k]`` in the order
-        given (each node once); without it the nodes stay at their rest positions, and are
-        stored sorted with repeats dropped.
-    velocity : callable, optional
-        ``velocity(t) -> (p, 3)`` [m/s], only with ``motion``; without it a central
-        difference of ``motion`` with step 1e-6 s is used.
-
-    Attributes
-    ----------
-    mask_length : int or None
-        The length of the boolean mask ``nodes`` came from (None for indices).
-
-    Raises
-    ------
-    TypeError
-        ``nodes`` that are neither integers nor a boolean mask; ``motion`` or ``velocity`` not callable.
-    ValueError
-        No node, a negative index, a node listed twice with ``motion``, ``velocity`` without ``motion``.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from volspring import Pins
-    >>> Pins([3, 1, 3]).nodes.tolist()
-    [1, 3]
-    >>> Pins(np.array([True, False, True])).nodes.tolist()
-    [0, 2]
-    """
-
-    nodes: np.ndarray
-    motion: Callable | None = None
-    velocity: Callable | None = None
-    mask_length: int | None = field(default=None, init=False, repr=False)
-
-    def __post_init__(self):
-        for name in ("motion", "velocity"):
-            function = getattr(self, name)
-            if function is not None and not callable(function):
-                raise TypeError(f"Pins {name} = {_shown(function)} is not callable; expected {name}(t) -> (p, 3)")
-        if self.velocity is not None and self.motion is None:
-            raise ValueError("Pins velocity= was given without motion=; without motion the pinned nodes "
-                             "stay at rest, so give motion(t) too")
-        nodes, mask_length = _pinned_indices(self.nodes)
-        if nodes.size == 0:
-            raise ValueError("Pins need at least one node" if mask_length is None else
-                             f"Pins need at least one node: the mask's {mask_length} entries are all False")
-        if self.motion is None:
-            nodes = np.unique(nodes)
-        else:
-            unique, first = np.unique(nodes, return_index=True)
-            if len(unique) < len(nodes):
-                repeat = int(np.flatnonzero(~np.isin(np.arange(len(nodes)), first))[0])
-                raise ValueError(f"Pins nodes[{repeat}] = {nodes[repeat]} is listed twice; with motion= each "
-                                 "node must appear once (row k of motion(t) is the position of nodes[k])")
-        nodes.setflags(write=False)
-        object.__setattr__(self, "nodes", nodes)
-        object.__setattr__(self, "mask_length", mask_length)
-
-    def positions(self, rest_positions, t) -> np.ndarray:
-        """(p, 3) float -- where the pinned nodes are at time t [m]."""
-        if self.motion is None:
-            return rest_positions[self.nodes]
-        return self._checked(self.motion(t), "motion", t)
-
-    def velocities(self, t) -> np.ndarray:
-        """(p, 3) float -- velocities of the pinned nodes at time t [m/s]."""
-        if self.motion is None:
-            return np.zeros((len(self.nodes), 3))
-        if self.velocity is not None:
-            return self._checked(self.velocity(t), "velocity", t)
-        h = 1e-6  # central difference: O(h^2) error, far below any simulation step
-        ahead, behind = (self._checked(self.motion(t + d), "motion", t) for d in (h, -h))
-        return (ahead - behind) / (2 * h)
-
-    def _checked(self, value, name, t):
-        value = np.asarray(value, dtype=np.float64)
-        if value.shape != (len(self.nodes), 3) or not np.isfinite(value).all():
-            raise ValueError(f"Pins.{name}({t}) must return finite values of shape ({len(self.nodes)}, 3), "
-                             f"got shape {value.shape}")
-        return value
-
-
-def _pinned_indices(nodes):
-    """(p,) int64 node indices from what ``Pins`` was given, and the mask's length (None for indices)."""
-    if isinstance(nodes, (bool, np.bool_)):
-        raise TypeError(f"Pins nodes = {nodes!r} is a bool; expected node indices or a boolean mask "
-                        "with one entry per node")
-    try:
-        array = np.asarray(nodes)
-    except ValueError as error:  # ragged nested sequences
-        raise ValueError(f"Pins nodes = {_shown(nodes)} is not a regular array: {error}") from None
-    if array.size == 0 and array.dtype.kind != "b":  # [] is a float64 array
-        return np.zeros(0, dtype=np.int64), None
-    if array.dtype.kind == "b":
-        if array.ndim != 1:
-            raise ValueError(f"Pins nodes is a boolean mask of shape {array.shape}; expected shape (n,), "
-                             "one entry per node")
-        return np.flatnonzero(array), len(array)
-    if array.dtype.kind in "iu" and not isinstance(nodes, np.ndarray):
-        # [True, 2] becomes the integers [1, 2]: refuse a list that mixes bools and integers
-        items = np.asarray(nodes, dtype=object).ravel()
-        mixed = [k for k, item in enumerate(items) if isinstance(item, (bool, np.bool_))]
-        if mixed:
-            raise TypeError(f"Pins nodes[{mixed[0]}] = {items[mixed[0]]!r} is a bool among integers; expected "
-                            "node indices, or a boolean mask with one entry per node")
-    if array.dtype.kind == "f":
-        flat = array.ravel()
-        fractional = np.flatnonzero(~np.isfinite(flat) | (flat != np.round(flat)))
-        if fractional.size:
-            k = int(fractional[0])
-            raise TypeError(f"Pins nodes[{k}] = {flat[k]} is not an integer node index")
-        raise TypeError(f"Pins nodes are {array.dtype} values, not integer node indices; convert "
-                        "integer-valued floats with np.asarray(nodes, dtype=int)")
-    if array.dtype.kind not in "iu":
-        raise TypeError(f"Pins nodes = {_shown(nodes)} are not integer node indices or a boolean mask "
-                        f"(got dtype {array.dtype})")
-    indices = array.astype(np.int64).ravel()
-    negative = np.flatnonzero(indices < 0)
-    if negative.size:
-        k = int(negative[0])
-        raise ValueError(f"Pins nodes[{k}] = {indices[k]} is negative; expected node indices >= 0 "
-                         "(they do not count from the end)")
-    return indices, None
-
-
-@dataclass(frozen=True, eq=False)
-class Gravity:
-    """Uniform gravity f_i = m_i g.
-
-    Parameters
-    ----------
-    masses : (n,) float
-        Node masses [kg], finite and >= 0 (``model.masses``; a 0 exempts a node).
-    g : (3,) float
-        Acceleration [m/s^2], default (0, 0, -9.81); stored as a read-only array.
-
-    Raises
-    ------
-    TypeError
-        Masses or g that are not numbers (bools, strings).
-    ValueError
-        ``g = (0, 0) is not a finite 3-vector (got shape (2,))``; a negative or non-finite mass.
-    """
-
-    masses: np.ndarray
-    g: tuple = (0.0, 0.0, -9.81)
-
-    def __post_init__(self):
-        object.__setattr__(self, "masses", _masses(self.masses, allow_zero=True))
-        object.__setattr__(self, "g", _vector("g", self.g))
-
-    def accumulate(self, x, v, t, out):
-        out += self.masses[:, None] * self.g
-
-    def potential_energy(self, x, t) -> float:
-        return float(-np.dot(self.masses, x @ self.g))
-
-
-@dataclass(frozen=True, eq=False)
-class Drag:
-    """Global viscous drag f_i = -c m_i v_i (a mass-proportional damping rate c [1/s]).
-
-    Parameters
-    ----------
-    masses : (n,) float
-        Node masses [kg], finite and >= 0 (``model.masses``; a 0 exempts a node).
-    rate : float
-        Damping rate c [1/s], finite and >= 0.
-    """
-
-    masses: np.ndarray
-    rate: float
-
-    def __post_init__(self):
-        object.__setattr__(self, "masses", _masses(self.masses, allow_zero=True))
-        rate = _real_number("drag rate", self.rate)
-        if not math.isfinite(rate) or rate < 0:
-            raise ValueError(f"drag rate = {rate} 1/s is not finite and >= 0")
-        object.__setattr__(self, "rate", rate)
-
-    def accumulate(self, x, v, t, out):
-        out -= self.rate * self.masses[:, None] * v
-
-    def jacobian(self, x, v, t):
-        return None, sp.diags(np.repeat(-self.rate * self.masses, 3))
-
-
-@dataclass(frozen=True, eq=False)
 class Scene:
     """A spring model with the forces, pins, obstacles and constraints a simulation asks for.
 
     Parameters
     ----------
-    model : SpringModel
+    model : Model
     forces : sequence of force objects (see the module docstring), e.g. ``Gravity``, ``Drag``
-    pins : Pins, optional
+    pins : Pins, optional -- whole nodes held or moved (the shorthand support)
     obstacles : sequence -- non-penetration obstacles, projected after each step
     constraints : sequence -- position projections (distance constraints, strain limiting; meant
         for the Verlet family), projected after each step
+    supports : sequence of Pins, Prescribed or Sliding -- supports per component
+        (:mod:`volspring.supports`), beside ``pins``
+
+    Attributes
+    ----------
+    held : (n, 3) bool -- the components any support prescribes (read-only)
+    free : (n,) bool -- nodes with at least one free component
 
     Obstacles and constraints have ``project(x, v, x_start, t, dt, free)``: after a step from
     ``x_start`` they move the free nodes' positions ``x`` (and fix velocities ``v``) in place.
@@ -284,25 +84,31 @@ class Scene:
     Raises
     ------
     TypeError
-        A model that is not a SpringModel, pins that are not a Pins, a single force instead of a
+        A model that is not a Model, pins that are not a Pins, a single force instead of a
         sequence, a force without ``accumulate`` or an obstacle or constraint without ``project``.
     ValueError
         A pinned node the model does not have, a pin mask of another length, or a built-in force
         (Gravity, Drag, Wind, PointAttractor, PointRepulser, Vortex) whose masses are not one per node.
     """
 
-    model: SpringModel
+    model: Model
     forces: tuple = ()
     pins: Pins | None = None
     obstacles: tuple = ()
     constraints: tuple = ()
+    supports: tuple = ()
+    held: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
-        if not isinstance(self.model, SpringModel):
-            raise TypeError(f"model must be a volspring SpringModel, got {type(self.model).__name__}")
+        if not isinstance(self.model, Model):
+            raise TypeError(f"model must be a volspring Model, got {type(self.model).__name__}")
         n = self.model.node_count
-        for name, method, arguments in (("forces", "accumulate", "x, v, t, out"),
-                                        ("obstacles", "project", "x, v, x_start, t, dt, free"),
+        forces = _sequence("forces", self.forces, "accumulate")
+        checked = []
+        for index, force in enumerate(forces):  # a loop, not a generator: a 0.1 force's warning points at Scene(...)
+            checked.append(as_force(force, name=f"forces[{index}]"))
+        object.__setattr__(self, "forces", tuple(checked))
+        for name, method, arguments in (("obstacles", "project", "x, v, x_start, t, dt, free"),
                                         ("constraints", "project", "x, v, x_start, t, dt, free")):
             items = _sequence(name, getattr(self, name), method)
             for index, item in enumerate(items):
@@ -310,27 +116,50 @@ class Scene:
                     raise TypeError(f"{name}[{index}] = {_shown(item)} has no {method}({arguments}) method")
             object.__setattr__(self, name, items)
         for index, force in enumerate(self.forces):
-            if isinstance(force, _MASS_PROPORTIONAL) and force.masses.shape != (n,):
+            if isinstance(force, MassProportional) and force.masses is not None and force.masses.shape != (n,):
                 raise ValueError(f"forces[{index}] ({type(force).__name__}) has {len(force.masses)} masses, but the "
                                  f"model has {n} nodes; expected one mass per node (model.masses)")
-        if self.pins is None:
-            return
-        if not isinstance(self.pins, Pins):
+        if self.pins is not None and not isinstance(self.pins, Pins):
             raise TypeError(f"pins = {_shown(self.pins)} is not a volspring Pins; expected e.g. pins=Pins([0, 1])")
-        if self.pins.mask_length is not None and self.pins.mask_length != n:
-            raise ValueError(f"Pins were given a boolean mask of {self.pins.mask_length} entries, but the model "
-                             f"has {n} nodes; expected one entry per node")
-        if self.pins.nodes.max() >= n:
-            raise ValueError(f"pinned node {self.pins.nodes.max()} does not exist: the model has {n} nodes "
-                             f"(indices 0 to {n - 1})")
+        supports = _sequence("supports", self.supports, "held")
+        for index, support in enumerate(supports):
+            if not isinstance(support, _SUPPORTS):
+                raise TypeError(f"supports[{index}] = {_shown(support)} is not a volspring support; expected "
+                                "Pins, Prescribed or Sliding")
+        object.__setattr__(self, "supports", supports)
+        held = np.zeros((n, 3), dtype=bool)
+        for support in self.all_supports:
+            label = type(support).__name__
+            if support.mask_length is not None and support.mask_length != n:
+                raise ValueError(f"{label} were given a boolean mask of {support.mask_length} entries, but the "
+                                 f"model has {n} nodes; expected one entry per node")
+            if support.nodes.max() >= n:
+                what = "pinned node" if isinstance(support, Pins) else f"{label} node"
+                raise ValueError(f"{what} {support.nodes.max()} does not exist: the model has {n} "
+                                 f"nodes (indices 0 to {n - 1})")
+            twice = held[support.nodes] & support.held
+            if twice.any():
+                node = int(support.nodes[np.flatnonzero(twice.any(axis=1))[0]])
+                raise ValueError(f"node {node} is held twice in the same component (by {label} and an earlier "
+                                 "support); hold each component of a node by one support")
+            held[support.nodes] |= support.held
+        held.setflags(write=False)
+        object.__setattr__(self, "held", held)
+
+    @property
+    def all_supports(self) -> tuple:
+        """The pins (if any) and the other supports, in that order."""
+        return ((self.pins,) if self.pins is not None else ()) + tuple(self.supports)
 
     @cached_property
     def free(self) -> np.ndarray:
-        """(n,) bool -- nodes whose motion the integrator computes."""
-        free = np.ones(self.model.node_count, dtype=bool)
-        if self.pins is not None:
-            free[self.pins.nodes] = False
-        return free
+        """(n,) bool -- nodes with at least one free component (the unknowns of the linear systems)."""
+        return ~self.held.all(axis=1)
+
+    @cached_property
+    def partly_held(self) -> bool:
+        """Whether some node is held in some components but free in others (sliding, prescribed)."""
+        return bool((self.held.any(axis=1) & self.free).any())
 
     def initial_state(self, x=None, v=None, t=0.0) -> State:
         """A state at rest (or at the given x, v), with the pins where they belong at t.
@@ -363,7 +192,7 @@ class Scene:
         x = self.model.rest_positions.copy() if x is None else _real_array("x", x)
         v = np.zeros_like(x) if v is None else _real_array("v", v)
         _check_motion(x, v, self.model.node_count, prefix="", finite=True)
-        self.enforce_pins(x, v, t)
+        self.enforce_supports(x, v, t)
         return State(x, v, t)
 
     def check_state(self, state, *, finite=True) -> None:
@@ -392,9 +221,9 @@ class Scene:
 
         Examples
         --------
-        >>> from volspring import Scene, SpringModel
-        >>> scene = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0))
-        >>> other = Scene(SpringModel.from_arrays([[0, 0, 0]], [1.0], [], stiffness=1.0))
+        >>> from volspring import Scene, Model
+        >>> scene = Scene(Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=1.0))
+        >>> other = Scene(Model.from_arrays([[0, 0, 0]], [1.0], [], stiffness=1.0))
         >>> scene.check_state(other.initial_state())
         Traceback (most recent call last):
         ...
@@ -406,42 +235,88 @@ class Scene:
         if finite and not math.isfinite(state.t):
             raise ValueError(f"state.t = {state.t} s is not a finite time")
 
-    def enforce_pins(self, x, v, t) -> None:
-        """Set the pinned nodes' positions and velocities at time t, in place."""
-        if self.pins is not None:
-            x[self.pins.nodes] = self.pins.positions(self.model.rest_positions, t)
-            v[self.pins.nodes] = self.pins.velocities(t)
+    def support_motion(self, t) -> tuple:
+        """(positions (n, 3) [m], velocities (n, 3) [m/s]) the supports prescribe at time t; only the
+        entries where :attr:`held` is True mean anything (the rest are 0)."""
+        positions, velocities = np.zeros((self.model.node_count, 3)), np.zeros((self.model.node_count, 3))
+        for support in self.all_supports:
+            held = support.held
+            positions[support.nodes[:, None], np.flatnonzero(held)] = \
+                support.positions(self.model.rest_positions, t)[:, held]
+            velocities[support.nodes[:, None], np.flatnonzero(held)] = support.velocities(t)[:, held]
+        return positions, velocities
+
+    def enforce_supports(self, x, v, t) -> None:
+        """Set the held components of positions and velocities to what the supports prescribe at t, in place."""
+        if not self.all_supports:
+            return
+        positions, velocities = self.support_motion(t)
+        x[self.held] = positions[self.held]
+        v[self.held] = velocities[self.held]
+
+    enforce_pins = enforce_supports
 
     def project(self, x, v, x_start, t, dt) -> None:
-        """After a step: project constraints, then obstacles, then put pinned nodes back, in place."""
+        """After a step: project constraints, then obstacles, then put held components back, in place."""
         for item in self.constraints + self.obstacles:
             item.project(x, v, x_start, t, dt, self.free)
-        self.enforce_pins(x, v, t)
+        self.enforce_supports(x, v, t)
+
+    # ------------------------------------------------------------------ the algebra of the forces
+    @cached_property
+    def conservative(self) -> bool:
+        """Whether every external force has a potential (the model's element sets all have one)."""
+        return all(isinstance(force, HasPotential) for force in self.forces)
+
+    def external_forces(self, x, v, t, out=None) -> np.ndarray:
+        """(n, 3) float -- the external forces on every node [N], added into ``out`` when given."""
+        out = np.zeros((self.model.node_count, 3)) if out is None else out
+        for force in self.forces:
+            force.accumulate(self.model, x, v, t, out)
+        return out
 
     def forces_at(self, x, v, t) -> np.ndarray:
-        """(n, 3) float -- total force on every node [N]: springs, dampers and the scene's forces."""
-        total = spring_forces(self.model, x, v)
+        """(n, 3) float -- total force on every node [N]: the model's element sets and the external forces."""
+        return self.external_forces(x, v, t, out=self.model.forces(x, v))
+
+    def external_jacobian(self, x, v, t) -> tuple:
+        """(dF_dx, dF_dv) of the external forces, each (3n, 3n) sparse or None where no force has one.
+
+        Forces without a ``jacobian`` are left out (they are treated explicitly by the implicit
+        integrator); the element sets' Jacobians are assembled block by block instead
+        (:class:`volspring.assembly.BlockPattern`).
+        """
+        dfdx = dfdv = None
         for force in self.forces:
-            force.accumulate(x, v, t, total)
-        return total
+            if not isinstance(force, HasJacobian):
+                continue
+            jx, jv = force.jacobian(self.model, x, v, t)
+            if jx is not None:
+                dfdx = jx if dfdx is None else dfdx + jx
+            if jv is not None:
+                dfdv = jv if dfdv is None else dfdv + jv
+        return dfdx, dfdv
+
+    def external_potential(self, x, t=0.0) -> float:
+        """Potential of the conservative external forces [J] (non-conservative ones contribute nothing)."""
+        return float(sum(force.potential_energy(self.model, x, t) for force in self.forces
+                         if isinstance(force, HasPotential)))
 
     def accelerations(self, x, v, t) -> np.ndarray:
-        """(n, 3) float -- F / m [m/s^2], 0 on pinned nodes (their motion is set by ``enforce_pins``)."""
+        """(n, 3) float -- F / m [m/s^2], 0 on held components (their motion is set by :meth:`enforce_supports`)."""
         a = self.forces_at(x, v, t) / self.model.masses[:, None]
-        if self.pins is not None:
-            a[self.pins.nodes] = 0.0
+        a[self.held] = 0.0
         return a
 
     def potential_energy(self, x, t=0.0) -> float:
-        """Spring energy plus the potential of every conservative force [J]."""
-        return spring_energy(self.model, x) + sum(
-            force.potential_energy(x, t) for force in self.forces if hasattr(force, "potential_energy"))
+        """Energy of the element sets plus the potential of every conservative external force [J]."""
+        return self.model.energy(x) + self.external_potential(x, t)
 
     def kinetic_energy(self, v) -> float:
         return float(0.5 * np.dot(self.model.masses, np.einsum("ij,ij->i", v, v)))
 
 
-_MASS_PROPORTIONAL = (Gravity, Drag, Wind, PointAttractor, Vortex)  # forces that hold (n,) masses
+_SUPPORTS = (Pins, Prescribed, Sliding)
 
 
 def _sequence(name, items, method) -> tuple:
@@ -472,3 +347,12 @@ def _check_motion(x, v, n, *, prefix, finite) -> None:
         node = int(np.flatnonzero(bad)[0])
         raise ValueError(f"{prefix}{name}[{node}] = {array[node].tolist()} {unit} is not finite (the {what} of "
                          f"node {node}; {int(bad.sum())} node(s) have a NaN or Inf {what})")
+
+
+def __getattr__(name):
+    # Gravity and Drag lived here in 0.1; they are forces now, beside the others.
+    from volspring._deprecation import deprecated_alias
+    from volspring.forces import Drag, Gravity
+
+    return deprecated_alias(__name__, name, {"Gravity": ("volspring.Gravity", Gravity),
+                                             "Drag": ("volspring.Drag", Drag)})

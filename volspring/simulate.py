@@ -60,7 +60,7 @@ from volspring.errors import SimulationDiverged, TetsInvertedWarning
 from volspring.integrators import Integrator, make_integrator
 from volspring.material import _real_number
 from volspring.scene import Scene, State
-from volspring.springs import spring_energy
+from volspring.forces import HasPotential
 from volspring.stability import GUARD_ACTIONS, StabilityGuard
 
 __all__ = ["simulate", "SimulationResult", "RUNAWAY_FACTOR", "RUNAWAY_CHECKS", "ENERGY_CHECK_INTERVAL"]
@@ -115,7 +115,7 @@ class _EnergyMonitor:
 
     def __init__(self, scene: Scene, state: State, *, energy_limit, runaway_factor, runaway_checks):
         self.scene = scene
-        self.nonconservative = [f for f in scene.forces if not hasattr(f, "potential_energy")]
+        self.nonconservative = [f for f in scene.forces if not isinstance(f, HasPotential)]
         self.kinetic, self.potential = self.energies(state)
         self.latest = state
         self.start = self.kinetic + self.potential
@@ -127,11 +127,9 @@ class _EnergyMonitor:
         self.moving_pins = scene.pins is not None and scene.pins.motion is not None
         if energy_limit is None:
             model = scene.model
-            external = np.zeros_like(state.x)
-            for force in scene.forces:
-                force.accumulate(state.x, state.v, state.t, external)
+            external = scene.external_forces(state.x, state.v, state.t)
             size = float(np.linalg.norm(np.ptp(model.rest_positions, axis=0)))
-            self.scale = (self.kinetic + spring_energy(model, state.x)
+            self.scale = (self.kinetic + model.energy(state.x)
                           + size * float(np.linalg.norm(external, axis=1).sum()))
             self.active = self.scale > 0 and math.isfinite(runaway_factor)
             self.allowance = runaway_factor * self.scale
@@ -148,7 +146,7 @@ class _EnergyMonitor:
             return None
         total = np.zeros_like(state.x)
         for force in self.nonconservative:
-            force.accumulate(state.x, state.v, state.t, total)
+            force.accumulate(self.scene.model, state.x, state.v, state.t, total)
         total[~self.scene.free] = 0.0
         return total
 
@@ -242,9 +240,9 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
 
     Examples
     --------
-    >>> from volspring import Scene, SpringModel
+    >>> from volspring import Scene, Model
     >>> from volspring.simulate import simulate
-    >>> scene = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0))
+    >>> scene = Scene(Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0))
     >>> result = simulate(scene, "verlet", duration=0.1, dt=0.01, frame_dt=0.05,
     ...                   state=scene.initial_state(v=[[0, 0, 0], [1, 0, 0]]))
     >>> result.time.round(12).tolist(), result.steps_taken

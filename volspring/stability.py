@@ -27,9 +27,9 @@ Estimates of omega_max:
 
 Examples
 --------
->>> from volspring import Scene, SpringModel
+>>> from volspring import Scene, Model
 >>> from volspring.stability import critical_step, omega_max_estimate
->>> pair = SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=50.0)
+>>> pair = Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=50.0)
 >>> round(omega_max_estimate(Scene(pair)), 12)  # sqrt(k / mu) with mu = 1/2
 10.0
 >>> critical_step("symplectic_euler", 10.0)
@@ -41,14 +41,13 @@ from __future__ import annotations
 import logging
 import math
 import warnings
-import weakref
 
 import numpy as np
 import scipy.sparse as sp
 
 from volspring.assembly import stiffness_matrix
 from volspring.errors import StepTooLarge, StepTooLargeWarning
-from volspring.model import SpringModel
+from volspring.model import Model
 from volspring.scene import Scene
 from volspring.springs import spring_stiffness_blocks
 
@@ -68,9 +67,9 @@ GUARD_ACTIONS = ("warn", "raise", "off")
 def _model_and_free(system):
     if isinstance(system, Scene):
         return system.model, system.free
-    if isinstance(system, SpringModel):
+    if isinstance(system, Model):
         return system, np.ones(system.node_count, dtype=bool)
-    raise TypeError(f"expected a Scene or SpringModel, got {type(system).__name__}")
+    raise TypeError(f"expected a Scene or Model, got {type(system).__name__}")
 
 
 def _spring_blocks(model, x):
@@ -85,7 +84,7 @@ def omega_max_bound(system, *, x=None) -> float:
 
     Parameters
     ----------
-    system : Scene or SpringModel -- a scene's pinned nodes are left out
+    system : Scene or Model -- a scene's pinned nodes are left out
     x : (n, 3) float, optional -- configuration of the stiffness blocks [m]; default the rest shape
 
     Returns
@@ -120,7 +119,7 @@ def omega_max_estimate(system, *, x=None, exact_dofs=EXACT_DOFS) -> float:
 
     Parameters
     ----------
-    system : Scene or SpringModel -- a scene's pinned nodes are left out
+    system : Scene or Model -- a scene's pinned nodes are left out
     x : (n, 3) float, optional -- configuration of the stiffness blocks [m]; default the rest shape
     exact_dofs : int -- up to this many free dofs the value is exact (dense or tight Lanczos);
         above it, loose Lanczos times ``LANCZOS_SAFETY`` (never below the exact value in practice)
@@ -220,9 +219,6 @@ def growth_per_step(integrator, h_omega: float) -> float:
     return 1.0 if z <= cls.stability_limit else math.inf
 
 
-_OMEGA_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-
-
 class StabilityGuard:
     """Checks a step against an explicit integrator's stability limit before stepping.
 
@@ -232,9 +228,12 @@ class StabilityGuard:
     integrator : Integrator, Integrator subclass or registered name
     action : {"warn", "raise", "off"} -- on a step too large, warn with
         :class:`~volspring.errors.StepTooLargeWarning`, raise :class:`~volspring.errors.StepTooLarge`, or do nothing
-    method : {"estimate", "bound"} -- which omega_max (computed once per scene, cached)
+    method : {"estimate", "bound"} -- which omega_max (computed once per guard, on the first check)
     growth_limit : float -- for schemes unstable at every step (stability_limit 0), the largest
         tolerated growth of the fastest undamped mode's amplitude over the planned steps
+    omega_max : float, optional -- omega_max of the scene's free dofs [rad/s] when the caller knows
+        it already (e.g. from :func:`omega_max`, to check many steps or integrators on one scene
+        without estimating it again); ``method`` is then not used
 
     A step is too large when ``dt > stability_limit / omega_max``, or, for schemes with
     ``stability_limit == 0``, when ``growth_per_step(h omega_max) ** steps > growth_limit``.
@@ -243,9 +242,9 @@ class StabilityGuard:
     Examples
     --------
     >>> import warnings
-    >>> from volspring import Scene, SpringModel
+    >>> from volspring import Scene, Model
     >>> from volspring.stability import StabilityGuard
-    >>> scene = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=50.0))
+    >>> scene = Scene(Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=50.0))
     >>> guard = StabilityGuard(scene, "symplectic_euler", action="raise")
     >>> guard.check(0.19)
     >>> guard.check(0.21)  # doctest: +ELLIPSIS
@@ -254,7 +253,8 @@ class StabilityGuard:
     volspring.errors.StepTooLarge: dt = 0.21 s is above the critical step 0.2 s of symplectic_euler ...
     """
 
-    def __init__(self, scene: Scene, integrator, *, action="warn", method="estimate", growth_limit=2.0):
+    def __init__(self, scene: Scene, integrator, *, action="warn", method="estimate", growth_limit=2.0,
+                 omega_max=None):
         if action not in GUARD_ACTIONS:
             raise ValueError(f"guard action = {action!r}; expected one of {', '.join(map(repr, GUARD_ACTIONS))}")
         if method not in ("estimate", "bound"):
@@ -263,15 +263,17 @@ class StabilityGuard:
             raise ValueError(f"growth_limit = {growth_limit!r} is not > 1")
         self.scene, self.action, self.method, self.growth_limit = scene, action, method, float(growth_limit)
         self.integrator = _integrator_class(integrator)
+        if omega_max is not None and not (math.isfinite(omega_max) and omega_max >= 0):
+            raise ValueError(f"omega_max = {omega_max!r} rad/s is not finite and >= 0")
+        self._omega_max = None if omega_max is None else float(omega_max)
 
     @property
     def omega_max(self) -> float:
-        """omega_max of the scene's free dofs at rest [rad/s] (cached per scene and method)."""
-        cache = _OMEGA_CACHE.setdefault(self.scene, {})
-        if self.method not in cache:
-            cache[self.method] = omega_max(self.scene, method=self.method)
-            logger.debug("omega_max (%s) = %.6g rad/s", self.method, cache[self.method])
-        return cache[self.method]
+        """omega_max of the scene's free dofs at rest [rad/s] (as given, or computed by ``method`` once per guard)."""
+        if self._omega_max is None:
+            self._omega_max = omega_max(self.scene, method=self.method)
+            logger.debug("omega_max (%s) = %.6g rad/s", self.method, self._omega_max)
+        return self._omega_max
 
     @property
     def critical_step(self) -> float:

@@ -40,10 +40,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from volspring.assembly import BlockPattern, linearize_springs, rigid_body_modes
+from meshing.geometry import rigid_body_modes
+from volspring.assembly import BlockPattern, eliminate_held, held_unknowns, linearize_springs
 from volspring.errors import SolverNotConverged
 from volspring.solvers import make_linear_solver
-from volspring.springs import spring_energy
 
 __all__ = ["StaticResult", "solve_static"]
 
@@ -109,9 +109,9 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
 
     Examples
     --------
-    >>> from volspring import Gravity, Pins, Scene, SpringModel
-    >>> string = SpringModel.from_arrays([[0, 0, 0], [0, 0, -1]], [1.0, 1.0], [[0, 1]], stiffness=100.0)
-    >>> scene = Scene(string, forces=[Gravity(string.masses)], pins=Pins([0]))
+    >>> from volspring import Gravity, Pins, Scene, Model
+    >>> string = Model.from_arrays([[0, 0, 0], [0, 0, -1]], [1.0, 1.0], [[0, 1]], stiffness=100.0)
+    >>> scene = Scene(string, forces=[Gravity()], pins=Pins([0]))
     >>> result = solve_static(scene, solver="direct")
     >>> round(float(result.x[1, 2]), 6)  # -1 - m g / k
     -1.0981
@@ -122,34 +122,37 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
     if x.shape != (n, 3) or not np.isfinite(x).all():
         raise ValueError(f"x0 must be finite with shape ({n}, 3), got shape {x.shape}")
     zero = np.zeros_like(x)
-    if scene.pins is None:
-        load = np.zeros_like(x)
-        for force in scene.forces:
-            force.accumulate(x, zero, t, load)
-        net = load.sum(axis=0)
+    if not scene.all_supports:
+        net = scene.external_forces(x, zero, t).sum(axis=0)
         if np.linalg.norm(net) > 0:
             raise ValueError(f"the scene has no pins: under the net load {np.round(net, 6).tolist()} N the body "
                              f"would fall with acceleration {np.round(net / model.total_mass, 6).tolist()} m/s^2 "
                              "and has no static equilibrium; pin some nodes")
         raise ValueError("the scene has no pins: its equilibrium is defined only up to a rigid motion "
                          "(the stiffness matrix is singular); pin at least three non-collinear nodes")
-    scene.enforce_pins(x, zero.copy(), t)
+    scene.enforce_supports(x, zero.copy(), t)
     pattern = BlockPattern(model, scene.free)
+    held = held_unknowns(pattern, scene.held) if scene.partly_held else None
+
+    def restrict(vectors):
+        """The free unknowns' rows of a per-node array, 0 on held components."""
+        rows = pattern.restrict(vectors)
+        if held is not None:
+            rows[held] = 0.0
+        return rows
     linear = make_linear_solver(solver, **({} if solver == "direct" else {"rtol": linear_rtol, "maxiter": 2000}))
-    conservative = all(hasattr(force, "potential_energy") for force in scene.forces)
+    conservative = scene.conservative
 
     def evaluate(positions):
         springs = linearize_springs(pattern, positions, stiffness_scale=1.0, clamp_compression=clamp_compression)
-        load = np.zeros_like(positions)
-        for force in scene.forces:
-            force.accumulate(positions, zero, t, load)
+        load = scene.external_forces(positions, zero, t)
         return springs, load, springs.forces + load
 
     springs, load, force = evaluate(x)
-    scale = float(np.linalg.norm(pattern.restrict(load)))
+    scale = float(np.linalg.norm(restrict(load)))
     if scale == 0.0:
-        scale = max(float(np.linalg.norm(pattern.restrict(springs.forces))), np.finfo(float).tiny)
-    residual = pattern.restrict(force)
+        scale = max(float(np.linalg.norm(restrict(springs.forces))), np.finfo(float).tiny)
+    residual = restrict(force)
     history = [float(np.linalg.norm(residual)) / scale]
     target = max(rtol, _roundoff_floor(model, pattern) / scale)
     if target > rtol:
@@ -161,10 +164,10 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
         if history[-1] <= target:
             break
         extra = _force_stiffness(scene, pattern, x, t)
-        mean_diagonal = float(pattern.matrix(springs.blocks).diagonal().mean())
+        mean_diagonal = float(pattern.matrix(springs).diagonal().mean())
         for attempt in range(12):
-            step, info = _newton_step(linear, pattern, springs.blocks, extra, residual, shift * mean_diagonal, x)
-            accepted = step is not None and _line_search(scene, pattern, evaluate, x, step, residual, merit, t,
+            step, info = _newton_step(linear, pattern, springs, extra, residual, shift * mean_diagonal, x, held)
+            accepted = step is not None and _line_search(scene, pattern, restrict, evaluate, x, step, residual, merit, t,
                                                          conservative)
             if accepted:
                 break
@@ -176,31 +179,23 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
                                      "be singular (too few pins) or unstable (buckling)")
         linear_iterations.append(info.iterations)
         x, springs, load, force, merit = accepted
-        residual = pattern.restrict(force)
+        residual = restrict(force)
         history.append(float(np.linalg.norm(residual)) / scale)
         shift = shift / 10.0 if shift > 1e-8 else 0.0
     if history[-1] > target:
         raise SolverNotConverged(f"static solve did not converge in {max_iterations} Newton iterations: relative "
                                  f"force residual {history[-1]:.3g}, expected <= {target:.3g}")
-    energy = spring_energy(model, x) + sum(f.potential_energy(x, t) for f in scene.forces
-                                           if hasattr(f, "potential_energy"))
+    energy = scene.potential_energy(x, t)
     return StaticResult(x, history[-1], len(history) - 1, float(energy), np.array(history), tuple(linear_iterations))
 
 
 def _force_stiffness(scene, pattern, x, t):
     """-dF/dx of the scene's forces over the free unknowns, or None."""
-    total = None
-    for force in scene.forces:
-        jacobian = getattr(force, "jacobian", None)
-        if jacobian is None:
-            continue
-        dfdx, _ = jacobian(x, np.zeros_like(x), t)
-        if dfdx is not None:
-            total = -dfdx if total is None else total - dfdx
-    if total is None:
+    dfdx, _ = scene.external_jacobian(x, np.zeros_like(x), t)
+    if dfdx is None:
         return None
     dofs = pattern.free_dofs()
-    return sp.csr_matrix(total)[dofs][:, dofs]
+    return sp.csr_matrix(-dfdx)[dofs][:, dofs]
 
 
 def _roundoff_floor(model, pattern) -> float:
@@ -210,19 +205,24 @@ def _roundoff_floor(model, pattern) -> float:
     return float(np.finfo(float).eps * np.sqrt(3.0) * np.linalg.norm(per_node[pattern.free_nodes]))
 
 
-def _newton_step(linear, pattern, blocks, extra, residual, shift, x):
+def _newton_step(linear, pattern, linearization, extra, residual, shift, x, held=None):
     """Solve (K + shift I) dx = F; (None, None) when the solve fails (singular or indefinite K)."""
-    stiffness = pattern.matrix(blocks, np.full(pattern.free_count, shift) if shift else None)
+    stiffness = pattern.matrix(linearization, np.full(pattern.free_count, shift) if shift else None)
+    if held is not None:  # the residual is 0 on held components, and so is the step
+        stiffness, _, extra = eliminate_held(pattern, stiffness, held, extra=extra)
     try:
         if linear.method == "amg":
             linear.build(stiffness, rigid_body_modes(x[pattern.free_nodes]))
-        return linear.solve(stiffness, residual, extra=extra)
+        step, info = linear.solve(stiffness, residual, extra=extra)
+        if held is not None:
+            step[held] = 0.0
+        return step, info
     except (SolverNotConverged, np.linalg.LinAlgError, ArithmeticError, RuntimeError) as error:
         logger.debug("static Newton step failed (%s)", error)
         return None, None
 
 
-def _line_search(scene, pattern, evaluate, x, step, residual, merit, t, conservative):
+def _line_search(scene, pattern, restrict, evaluate, x, step, residual, merit, t, conservative):
     """Backtracking from the full step; the accepted (x, springs, load, force, merit) or None."""
     step_nodes = np.zeros_like(x)
     step_nodes[pattern.free_nodes] = step.reshape(-1, 3)
@@ -245,9 +245,9 @@ def _line_search(scene, pattern, evaluate, x, step, residual, merit, t, conserva
             # Near the solution the energy change drowns in round-off of the energy itself:
             # there, a lower force residual decides.
             if abs(value - merit) <= 1e-12 * (abs(value) + abs(merit)) and \
-                    np.linalg.norm(pattern.restrict(force)) < norm:
+                    np.linalg.norm(restrict(force)) < norm:
                 return trial, springs, load, force, value
-        elif np.linalg.norm(pattern.restrict(force)) <= (1.0 - 1e-4 * alpha) * norm:
+        elif np.linalg.norm(restrict(force)) <= (1.0 - 1e-4 * alpha) * norm:
             return trial, springs, load, force, None
         alpha *= 0.5
     return None

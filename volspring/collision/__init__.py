@@ -9,13 +9,15 @@ The data path reads one way::
 
 and the response turns depths and directions into penalty forces::
 
-    system = assemble_bodies([Body(mesh, material, translation=...), ...])   # one model, many bodies
-    scene = Scene(system.model, forces=[Gravity(...), ContactForce(system), ObstacleContactForce(system, [floor])])
+    model = Model.from_bodies([Body(mesh, material, translation=...), ...])   # one model, many bodies
+    scene = Scene(model, forces=[Gravity(), ContactForce(model), ObstacleContactForce(model, [floor])])
+
+(``Body`` is :class:`volspring.bodies.Body`; the old ``Body``, ``assemble_bodies`` and
+``MultiBodyModel`` of this package still work until volspring 0.3.0, with a DeprecationWarning.)
 """
 
 from volspring.collision.bodies import CollisionBodies
 from volspring.collision.contact import ContactForce, ObstacleContactForce, PenaltyContacts
-from volspring.collision.multibody import Body, MultiBodyModel, assemble_bodies
 from volspring.collision.obstacles import ObstacleContacts, StaticTriangleMesh, obstacle_contacts
 from volspring.collision.penetration import (
     PenetrationDepths,
@@ -25,10 +27,8 @@ from volspring.collision.penetration import (
 from volspring.collision.spatial_hash import SpatialHash, VertexTetContacts, detect_collisions
 
 __all__ = [
-    "Body",
     "CollisionBodies",
     "ContactForce",
-    "MultiBodyModel",
     "ObstacleContactForce",
     "PenaltyContacts",
     "ObstacleContacts",
@@ -36,9 +36,21 @@ __all__ = [
     "SpatialHash",
     "StaticTriangleMesh",
     "VertexTetContacts",
-    "assemble_bodies",
     "closest_surface_depths",
     "consistent_penetration_depths",
     "detect_collisions",
     "obstacle_contacts",
 ]
+
+
+def __getattr__(name):
+    # Several bodies became one volspring.Model (Model.from_bodies); Body moved to volspring.bodies.
+    from volspring._deprecation import deprecated_alias
+    from volspring.bodies import Body
+    from volspring.collision import multibody
+
+    return deprecated_alias(__name__, name, {
+        "Body": ("volspring.bodies.Body", Body),
+        "assemble_bodies": ("volspring.Model.from_bodies", multibody.assemble_bodies),
+        "MultiBodyModel": ("volspring.Model (from Model.from_bodies)", multibody.MultiBodyModel),
+    })

@@ -1,4 +1,8 @@
-"""Several deformable bodies seen as one: the static, concatenated topology collision queries run on."""
+"""Several deformable bodies seen as one: the static, concatenated topology collision queries run on.
+
+Built from a :class:`~volspring.Model` (:meth:`CollisionBodies.from_model`: its topology's tet mesh
+split by ``node_body``) or from tet meshes directly.
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from volspring.mesh import TetMesh
+from meshing.mesh import TetMesh
 
 __all__ = ["CollisionBodies"]
 
@@ -24,10 +28,12 @@ class CollisionBodies:
     Parameters
     ----------
     meshes : sequence of TetMesh -- the bodies, in body-id order
+    model_nodes : (N,) int, optional -- the model node of each global node id (:meth:`from_model`);
+        default ``arange(N)``
 
     Examples
     --------
-    >>> from volspring import TetMesh
+    >>> from meshing import TetMesh
     >>> from volspring.collision import CollisionBodies
     >>> import numpy as np
     >>> tet = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
@@ -37,6 +43,7 @@ class CollisionBodies:
     """
 
     meshes: tuple
+    model_nodes: np.ndarray | None = None
 
     def __post_init__(self):
         meshes = tuple(self.meshes)
@@ -46,6 +53,61 @@ class CollisionBodies:
             if not isinstance(mesh, TetMesh):
                 raise TypeError(f"meshes[{index}] must be a TetMesh, got {type(mesh).__name__}")
         object.__setattr__(self, "meshes", meshes)
+        count = sum(mesh.node_count for mesh in meshes)
+        nodes = np.arange(count) if self.model_nodes is None else np.array(self.model_nodes)
+        if not np.issubdtype(nodes.dtype, np.integer) or nodes.shape != (count,):
+            raise ValueError(f"model_nodes has shape {nodes.shape} and dtype {nodes.dtype}; expected ({count},) "
+                             "integers, one model node per mesh node")
+        object.__setattr__(self, "model_nodes", _frozen(nodes.astype(np.int64)))
+
+    @classmethod
+    def from_model(cls, model) -> "CollisionBodies":
+        """The bodies of a :class:`~volspring.Model`: its topology's tet mesh split by ``model.node_body``.
+
+        Body b's mesh holds the model's mesh nodes of body b in ascending order and the tets among
+        them, in the model's order; ``model_nodes`` maps the global ids back to model nodes (for a
+        model from :meth:`Model.from_bodies <volspring.Model.from_bodies>`, ``arange(N)``).
+
+        Raises
+        ------
+        ValueError
+            For a model without a tet mesh (built from arrays), a body with no tet, or a tet whose
+            nodes belong to different bodies (naming the tet).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from meshing import TetMesh
+        >>> from volspring import Material, Model
+        >>> from volspring.bodies import Body
+        >>> tet = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
+        >>> rubber = Material(E=1e5, nu=0.3, density=1000.0)
+        >>> bodies = CollisionBodies.from_model(Model.from_bodies([Body(tet, rubber), Body(tet, rubber, translation=(2, 0, 0))]))
+        >>> bodies.body_count, bodies.meshes[1].points[:, 0].tolist(), bodies.model_nodes.tolist()
+        (2, [2.0, 3.0, 2.0, 2.0], [0, 1, 2, 3, 4, 5, 6, 7])
+        """
+        if model.topology is None:
+            raise ValueError("the model has no tet mesh to collide (built from arrays); build it with "
+                             "Model.from_mesh or Model.from_bodies")
+        mesh = model.topology.mesh
+        node_body = model.node_body[: mesh.node_count]
+        tet_body = node_body[mesh.tets[:, 0]]
+        mixed = (node_body[mesh.tets] != tet_body[:, None]).any(axis=1)
+        if mixed.any():
+            tet = int(np.flatnonzero(mixed)[0])
+            raise ValueError(f"tet {tet} = {mesh.tets[tet].tolist()} joins nodes of bodies "
+                             f"{node_body[mesh.tets[tet]].tolist()}; expected every tet within one body")
+        tet_counts = np.bincount(tet_body, minlength=model.body_count)
+        if (tet_counts == 0).any():
+            body = int(np.flatnonzero(tet_counts == 0)[0])
+            raise ValueError(f"body {body} has no tet in the model's mesh; expected a tet mesh for every body")
+        order = np.argsort(node_body, kind="stable")  # model node of each global id, body after body
+        offsets = np.concatenate([[0], np.cumsum(np.bincount(node_body, minlength=model.body_count))])
+        local = np.empty(mesh.node_count, dtype=np.int64)
+        local[order] = np.arange(mesh.node_count) - np.repeat(offsets[:-1], np.diff(offsets))
+        meshes = tuple(TetMesh(mesh.points[order[offsets[b]:offsets[b + 1]]], local[mesh.tets[tet_body == b]])
+                       for b in range(model.body_count))  # a loop over bodies
+        return cls(meshes, order)
 
     # ------------------------------------------------------------------ numbering
     @property
@@ -109,6 +171,11 @@ class CollisionBodies:
         both = both[np.lexsort((both[:, 1], both[:, 0]))]
         indptr = np.concatenate([[0], np.cumsum(np.bincount(both[:, 0], minlength=self.node_count))])
         return _frozen(indptr.astype(np.int64)), _frozen(both[:, 1].copy())
+
+    @cached_property
+    def mean_edge_lengths(self) -> np.ndarray:
+        """(b,) float -- mean rest edge length of each body [m] (the penalty stiffness rule's l)."""
+        return _frozen(np.array([mesh.edge_lengths.mean() for mesh in self.meshes]))
 
     @cached_property
     def mean_edge_length(self) -> float:

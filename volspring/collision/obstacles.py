@@ -1,5 +1,10 @@
 """Static obstacles: half-spaces and rigid triangle meshes, closed (a box, a rock) or open (a ramp, a bowl).
 
+A :class:`HalfSpace` serves twice: as a scene projection (``Scene(..., obstacles=[...])``: after
+each step a node below the plane is put back on it, with restitution and Coulomb friction) and,
+like a :class:`StaticTriangleMesh`, as a source of penalty contacts for
+:class:`~volspring.collision.ObstacleContactForce`.
+
 A static obstacle never moves and is infinitely stiff, so for it the depth of a vertex is simply
 its distance to the nearest point of the obstacle's surface, in the direction of that point. This
 is the closest-point rule that fails for two thin deformable bodies (see
@@ -13,15 +18,128 @@ Inside/outside of a closed mesh uses the angle-weighted pseudo-normal at the nea
 
 from __future__ import annotations
 
+import logging
+import math
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 
-from volspring.collision.triangles import nearest_surface_points
-from volspring.constraints import HalfSpace
+from meshing.geometry import nearest_surface_points, signed_volumes, triangle_area_normals
 
-__all__ = ["ObstacleContacts", "StaticTriangleMesh", "obstacle_contacts"]
+__all__ = ["HalfSpace", "ObstacleContacts", "StaticTriangleMesh", "obstacle_contacts"]
+
+logger = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class HalfSpace:
+    """A rigid obstacle filling the half-space below a plane: ``(x - point) . normal < 0``.
+
+    After a step, every free node found below the plane is
+
+    1. projected onto it along the normal (its penetration depth removed);
+    2. if it approaches (v_n = v . n < 0), given the normal velocity -e v_n (e = ``restitution``;
+       0 is a perfectly inelastic contact, 1 a perfect bounce): a normal impulse per unit mass
+       dv_n = (1 + e) |v_n|;
+    3. slowed tangentially by Coulomb friction: the tangential speed |v_t| is reduced by
+       mu dv_n (mu = ``friction``), and to 0 if it is smaller (static friction). Its position is
+       moved back by dt times the velocity removed, so that position and velocity agree.
+
+    Over a step of resting contact on a plane tilted by theta, gravity gives dv_n = g cos(theta) dt
+    and dv_t = g sin(theta) dt, so the node sticks iff tan(theta) <= mu and otherwise slides with
+    acceleration g (sin(theta) - mu cos(theta)), exactly Coulomb's law. This is exact for
+    symplectic Euler (x_1 = x_0 + dt v_1) and for Verlet with the backward-difference velocity
+    (x_1 - x_0) / dt; integrators must pass their end-of-step velocity. A Verlet integrator that
+    ignored the corrected ``v`` would still get the friction (from the corrected x) but see every
+    contact as inelastic; volspring's rebuild their history from ``v`` and keep the restitution.
+
+    Parameters
+    ----------
+    point : (3,) float -- a point on the plane [m]
+    normal : (3,) float -- outward normal, pointing into the free side [-], normalised here
+    restitution : float -- e in [0, 1] (keyword-only)
+    friction : float -- Coulomb coefficient mu >= 0 (keyword-only)
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volspring import HalfSpace
+    >>> ground = HalfSpace((0, 0, 0), (0, 0, 1), friction=0.5)
+    >>> x, v = np.array([[0.0, 0.0, -0.01]]), np.array([[1.0, 0.0, -1.0]])
+    >>> ground.project(x, v, np.zeros((1, 3)), 0.0, 0.01, np.ones(1, dtype=bool))
+    >>> x.round(6).tolist(), v.tolist()  # on the plane; tangential speed 1 - 0.5 * 1
+    ([[-0.005, 0.0, 0.0]], [[0.5, 0.0, 0.0]])
+    """
+
+    point: np.ndarray
+    normal: np.ndarray
+    restitution: float = field(default=0.0, kw_only=True)
+    friction: float = field(default=0.0, kw_only=True)
+
+    def __post_init__(self):
+        point = np.array(self.point, dtype=np.float64)
+        normal = np.array(self.normal, dtype=np.float64)
+        if point.shape != (3,) or not np.isfinite(point).all():
+            raise ValueError(f"point = {point.tolist()} is not a finite 3-vector [m]")
+        length = np.linalg.norm(normal) if normal.shape == (3,) else np.nan
+        if not (np.isfinite(length) and length > 0):
+            raise ValueError(f"normal = {normal.tolist()} is not a finite non-zero 3-vector")
+        if not (0.0 <= self.restitution <= 1.0):
+            raise ValueError(f"restitution = {self.restitution} is not in [0, 1]")
+        if not (math.isfinite(self.friction) and self.friction >= 0):
+            raise ValueError(f"friction = {self.friction} is not finite and >= 0")
+        normal = normal / length
+        for array in (point, normal):
+            array.setflags(write=False)
+        for name, value in (("point", point), ("normal", normal), ("restitution", float(self.restitution)),
+                            ("friction", float(self.friction))):
+            object.__setattr__(self, name, value)
+
+    def signed_distances(self, x) -> np.ndarray:
+        """(n,) float -- height of each node above the plane [m] (negative below)."""
+        return (x - self.point) @ self.normal
+
+    def contacts(self, points):
+        """Points below the plane, for penalty contact (``volspring.collision.ObstacleContactForce``).
+
+        Returns
+        -------
+        vertex : (k,) int -- indices of the points below the plane
+        depth : (k,) float -- how far below [m]
+        direction : (k, 3) float -- the way out (the normal)
+        closest : (k, 3) float -- nearest points on the plane [m]
+        face : (k,) int -- -1 (a plane has no faces)
+        """
+        points = np.asarray(points, dtype=np.float64)
+        height = self.signed_distances(points)
+        vertex = np.flatnonzero(height < 0)
+        depth = -height[vertex]
+        direction = np.broadcast_to(self.normal, (len(vertex), 3)).copy()
+        closest = points[vertex] + depth[:, None] * self.normal
+        return vertex, depth, direction, closest, np.full(len(vertex), -1, dtype=np.int64)
+
+    def project(self, x, v, x_start, t, dt, free) -> None:
+        depth = -self.signed_distances(x)
+        nodes = np.flatnonzero(free & (depth > 0))
+        if nodes.size == 0:
+            return
+        n = self.normal
+        x[nodes] += depth[nodes, None] * n
+        velocity = v[nodes]
+        normal_speed = velocity @ n
+        tangential = velocity - normal_speed[:, None] * n
+        approaching = normal_speed < 0
+        impulse = np.where(approaching, -(1.0 + self.restitution) * normal_speed, 0.0)  # dv_n >= 0
+        normal_speed = np.where(approaching, -self.restitution * normal_speed, normal_speed)
+        speed = np.linalg.norm(tangential, axis=1)
+        kept = np.zeros_like(speed)
+        moving = speed > self.friction * impulse
+        kept[moving] = 1.0 - self.friction * impulse[moving] / speed[moving]
+        removed = tangential * (1.0 - kept)[:, None]
+        v[nodes] = tangential - removed + normal_speed[:, None] * n
+        x[nodes] -= dt * removed
+        logger.debug("HalfSpace: %d node(s) in contact, deepest %.3g m", nodes.size, depth[nodes].max())
 
 
 def _unit(vector, name):
@@ -72,8 +190,8 @@ class StaticTriangleMesh:
         _, counts = np.unique(np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1), axis=0, return_counts=True)
         closed = bool((counts == 2).all())
         if closed:
-            x = vertices[faces]
-            volume = np.einsum("ij,ij->", x[:, 0], np.cross(x[:, 1], x[:, 2])) / 6.0
+            x = vertices[faces]  # the enclosed volume: a sum of tets from the origin to each face
+            volume = signed_volumes(np.zeros_like(x[:, 0]), x[:, 0], x[:, 1], x[:, 2]).sum()
             if volume < 0:
                 faces = faces[:, ::-1].copy()
         elif self.band is None or not np.isfinite(self.band) or self.band <= 0:
@@ -101,8 +219,7 @@ class StaticTriangleMesh:
     @cached_property
     def face_normals(self) -> np.ndarray:
         """(f, 3) float -- unit right-hand normals (outward for a closed mesh)."""
-        x = self.vertices[self.faces]
-        normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+        normal = triangle_area_normals(self.vertices, self.faces)
         return normal / np.linalg.norm(normal, axis=1, keepdims=True)
 
     @cached_property

@@ -36,21 +36,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshing.geometry import area_weighted_vertex_normals, nearest_surface_points
+from meshing.tolerances import CANCELLED, ON_SURFACE
 from volspring.collision.bodies import CollisionBodies
 from volspring.collision.spatial_hash import DEFAULT_TABLE_SIZE, SpatialHash, VertexTetContacts, expand_ranges
-from volspring.collision.triangles import (
-    area_weighted_vertex_normals,
-    nearest_surface_points,
-    segment_triangle_intersections,
-)
+from volspring.collision.triangles import segment_triangle_intersections
 
 __all__ = ["PenetrationDepths", "closest_surface_depths", "consistent_penetration_depths"]
 
 logger = logging.getLogger(__name__)
 
-# Guard of the 1/|x - p|^2 weights, relative to the cell size: a point closer than 1e-9 cell sizes to
-# a surface hit or a neighbour is at round-off distance, and its weight is capped at that distance.
-_WEIGHT_FLOOR = 1e-9
+# Guard of the 1/|x - p|^2 weights, relative to the cell size: a point closer than ON_SURFACE (1e-9) cell
+# sizes to a surface hit or a neighbour is at round-off distance, and its weight is capped at that distance.
+_WEIGHT_FLOOR = ON_SURFACE
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,7 +135,7 @@ def _scatter(index, weights, count):
 
 def _normalized(vectors):
     length = np.linalg.norm(vectors, axis=1)
-    ok = length > 1e-12  # unit-vector sums: below 1e-12 they have cancelled
+    ok = length > CANCELLED  # sums of unit vectors (summed length >= 1): below CANCELLED they have cancelled
     return np.divide(vectors, length[:, None], out=np.zeros_like(vectors), where=ok[:, None]), ok
 
 
@@ -223,7 +221,7 @@ def consistent_penetration_depths(bodies: CollisionBodies, positions, contacts: 
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import TetMesh
+    >>> from meshing import TetMesh
     >>> from volspring.collision import CollisionBodies, detect_collisions, consistent_penetration_depths
     >>> tet = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
     >>> bodies = CollisionBodies((tet, tet))

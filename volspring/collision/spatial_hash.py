@@ -4,7 +4,8 @@ The hash table of the paper is replaced by a sort: every item (a vertex, a trian
 in each grid cell its bounding box covers, under the key ``hash(cell) * G + group``; the keys are
 sorted once, and a query box looks up each of its cells with two binary searches. Cells whose
 hashes collide share a key range, so every candidate is checked against its real cell before any
-geometric test: a tiny table is slow, never wrong.
+geometric test: a tiny table is slow, never wrong. The geometric test is the barycentric inside test of
+:func:`meshing.geometry.barycentric_frames`, the one anchoring uses too.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from meshing.geometry import barycentric_frames
 from volspring.collision.bodies import CollisionBodies
 
 __all__ = ["HASH_PRIMES", "DEFAULT_TABLE_SIZE", "SpatialHash", "VertexTetContacts", "cell_hash", "detect_collisions"]
@@ -182,8 +184,9 @@ class VertexTetContacts:
     ----------
     vertex : (k,) int64 -- the penetrating vertex
     tet : (k,) int64 -- the tet it is inside
-    barycentric : (k, 4) float -- weights of the tet's four nodes at the vertex (sum 1, all >= 0):
-        the response distributes the reaction on the tet's nodes with them
+    barycentric : (k, 4) float -- weights of the tet's four nodes at the vertex (sum 1, all
+        >= -meshing.tolerances.ON_SURFACE, the slack for a vertex on a face): the response distributes
+        the reaction on the tet's nodes with them
     vertex_body, tet_body : (k,) int64 -- body ids (equal only for self-collisions)
     """
 
@@ -203,29 +206,14 @@ class VertexTetContacts:
         return np.unique(self.vertex)
 
 
-def tet_inverse_rows(x0, x1, x2, x3) -> tuple[np.ndarray, np.ndarray]:
-    """Rows of ``A^-1``, ``A = [x1 - x0, x2 - x0, x3 - x0]``, via the adjugate: ``((m, 3, 3), valid (m,))``.
-
-    ``beta = A^-1 (p - x0)`` are the barycentric weights of nodes 1..3. Flat tets (zero
-    determinant, possible in a deformed mesh) get zero rows and ``valid = False``.
-    """
-    a, b, c = x1 - x0, x2 - x0, x3 - x0
-    adjugate = np.stack([np.cross(b, c), np.cross(c, a), np.cross(a, b)], axis=1)
-    det = np.einsum("ij,ij->i", a, adjugate[:, 0])
-    # Flat relative to the tet's size: |det| below 1e-14 l^3 is round-off.
-    scale = np.maximum(np.abs(a).max(1), np.maximum(np.abs(b).max(1), np.abs(c).max(1))) ** 3
-    valid = np.abs(det) > 1e-14 * scale
-    inverse = np.where(valid[:, None, None], adjugate / np.where(valid, det, 1.0)[:, None, None], 0.0)
-    return inverse, valid
-
-
 def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, table_size=DEFAULT_TABLE_SIZE,
                       self_collision=False) -> VertexTetContacts:
     """Find every vertex inside a tet of another body (Teschner et al. 2003).
 
     Pass 1 hashes every vertex into the grid cell it lies in; pass 2 visits the cells covered by
     each tet's bounding box, takes the vertices found there, and keeps those inside the box and
-    then inside the tet (all barycentric weights ``>= 0``).
+    then inside the tet (all barycentric weights ``>= -ON_SURFACE``, :mod:`meshing.tolerances`; flat
+    tets of a deformed mesh contain nothing).
 
     Parameters
     ----------
@@ -244,7 +232,7 @@ def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, tab
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import TetMesh
+    >>> from meshing import TetMesh
     >>> from volspring.collision import CollisionBodies, detect_collisions
     >>> tet = TetMesh(np.array([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), np.array([[0, 1, 2, 3]]))
     >>> bodies = CollisionBodies((tet, tet))
@@ -280,14 +268,11 @@ def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, tab
     if self_collision:
         own = (bodies.tets[tet] == vertex[:, None]).any(axis=1)
         tet, vertex, local_tet = tet[~own], vertex[~own], local_tet[~own]
-    # Barycentric test with A^-1 precomputed per active tet (one 3x3 adjugate each).
-    inverse, valid = tet_inverse_rows(*(corners[tets, i] for i in range(4)))
-    beta = np.einsum("kij,kj->ki", inverse[local_tet], x[vertex] - corners[tet, 0])
-    inside = valid[local_tet] & _all3(beta >= 0.0) & (beta[:, 0] + beta[:, 1] + beta[:, 2] <= 1.0)
-    tet, vertex, beta = tet[inside], vertex[inside], beta[inside]
+    # Barycentric test with the map of each active tet precomputed (one 3x3 adjugate each).
+    inside, weights = barycentric_frames(corners[tets]).contains(x[vertex], local_tet)
+    tet, vertex, barycentric = tet[inside], vertex[inside], weights[inside]
     order = np.lexsort((tet, vertex))
-    tet, vertex, beta = tet[order], vertex[order], beta[order]
-    barycentric = np.concatenate([1.0 - beta.sum(axis=1, keepdims=True), beta], axis=1)
+    tet, vertex, barycentric = tet[order], vertex[order], barycentric[order]
     logger.debug("detection: %d active vertices, %d active tets, %d candidates, %d contacts",
                  len(vertices), len(tets), len(local_tet), len(vertex))
     return VertexTetContacts(vertex, tet, barycentric, bodies.node_body[vertex], bodies.tet_body[tet])

@@ -38,8 +38,12 @@ class Integrator(ABC):
     def advance(self, scene: Scene, state: State, dt: float) -> State:
         """The scheme itself: the next state before projections. Must not modify ``state``."""
 
-    def step(self, scene: Scene, state: State, dt: float) -> State:
+    def step(self, scene: Scene, state: State, dt: float, *, cache=None) -> State:
         """The state one step ``dt`` [s] after ``state``, projected; ``state`` is not modified.
+
+        ``cache`` is the :class:`~volspring.integrators.cache.SolverCache` of an implicit integrator
+        for this scene (default: its own); explicit integrators keep nothing between steps and
+        ignore it.
 
         Raises
         ------
@@ -59,7 +63,8 @@ class Integrator(ABC):
         if not isinstance(scene, Scene):
             raise TypeError(f"scene must be a volspring Scene, got {type(scene).__name__}")
         scene.check_state(state, finite=False)
-        new = self.advance(scene, state, dt)
+        new = self.advance(scene, state, dt) if cache is None or self.explicit else \
+            self.advance(scene, state, dt, cache=cache)
         self.project(scene, state, new, dt)
         check_finite(new, dt)
         return new

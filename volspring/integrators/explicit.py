@@ -40,7 +40,7 @@ def _stage_accelerations(scene: Scene, x, v, t) -> np.ndarray:
 
     ``x`` and ``v`` are stage arrays owned by the caller; the pinned rows are overwritten.
     """
-    scene.enforce_pins(x, v, t)
+    scene.enforce_supports(x, v, t)
     return scene.accelerations(x, v, t)
 
 
@@ -53,9 +53,9 @@ class ExplicitEuler(Integrator):
 
     Examples
     --------
-    >>> from volspring import Scene, SpringModel
+    >>> from volspring import Scene, Model
     >>> from volspring.integrators import ExplicitEuler
-    >>> scene = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0))
+    >>> scene = Scene(Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0))
     >>> state = ExplicitEuler().step(scene, scene.initial_state(v=[[0, 0, 0], [1, 0, 0]]), 1e-3)
     >>> float(state.x[1, 0]), state.step
     (1.001, 1)

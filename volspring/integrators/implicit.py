@@ -39,18 +39,20 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
-from volspring.assembly import BlockPattern, linearize_springs, rigid_body_modes, stiffness_times
+from meshing.geometry import rigid_body_modes
+from volspring.assembly import BlockPattern, eliminate_held, held_unknowns, linearize_springs, stiffness_times
 from volspring.integrators.base import Integrator
+from volspring.integrators.cache import SolverCache
 from volspring.scene import Scene, State
-from volspring import solvers
 from volspring.solvers import LINEAR_SOLVERS, SolveInfo, make_linear_solver
 
-__all__ = ["ImplicitEuler", "ImplicitStepInfo"]
+__all__ = ["ImplicitEuler", "ImplicitStepInfo", "SolverCache"]
 
 logger = logging.getLogger(__name__)
 
@@ -97,6 +99,16 @@ class _System:
     assembly_seconds: float
     extra_full: sp.csr_matrix | None  # -h dF/dv - h^2 dF/dx of scene forces, all unknowns
     extra_dfdx: sp.csr_matrix | None  # dF/dx of scene forces, all unknowns
+    held: np.ndarray | None = None  # (3f,) bool held unknowns of partly held nodes, eliminated
+    held_rhs: np.ndarray | None = None  # (3f,) what the held values put into the right-hand side (0 on held rows)
+
+    def with_held(self, b) -> np.ndarray:
+        """The right-hand side ``b`` with the held unknowns' rows set (see :func:`eliminate_held`)."""
+        if self.held is None:
+            return b
+        b = b.copy()
+        b[self.held] = 0.0
+        return b + self.held_rhs
 
 
 class ImplicitEuler(Integrator):
@@ -123,10 +135,10 @@ class ImplicitEuler(Integrator):
     Examples
     --------
     >>> import numpy as np
-    >>> from volspring import Gravity, Pins, Scene, SpringModel
+    >>> from volspring import Gravity, Pins, Scene, Model
     >>> from volspring.integrators.implicit import ImplicitEuler
-    >>> string = SpringModel.from_arrays([[0, 0, 0], [0, 0, -1]], [1.0, 1.0], [[0, 1]], stiffness=1e6)
-    >>> scene = Scene(string, forces=[Gravity(string.masses)], pins=Pins([0]))
+    >>> string = Model.from_arrays([[0, 0, 0], [0, 0, -1]], [1.0, 1.0], [[0, 1]], stiffness=1e6)
+    >>> scene = Scene(string, forces=[Gravity()], pins=Pins([0]))
     >>> integrator = ImplicitEuler(solver="direct")
     >>> state = scene.initial_state()
     >>> for _ in range(200):
@@ -141,7 +153,8 @@ class ImplicitEuler(Integrator):
     stability_limit = math.inf
 
     def __init__(self, *, solver="amg", rtol=1e-3, maxiter=500, newton_iterations=0, rebuild_growth=2.0,
-                 rebuild_every=None, clamp_compression=True, on_failure="raise", smoother="gauss_seidel"):
+                 rebuild_every=None, clamp_compression=True, on_failure="raise", smoother="gauss_seidel",
+                 timer=time.perf_counter):
         if solver not in LINEAR_SOLVERS:
             raise ValueError(f"unknown solver {solver!r}; known: {', '.join(LINEAR_SOLVERS)}")
         if int(newton_iterations) < 0:
@@ -155,51 +168,48 @@ class ImplicitEuler(Integrator):
             options.update(rtol=rtol, maxiter=maxiter)
         if solver == "amg":
             options.update(smoother=smoother)
-        self.solver = make_linear_solver(solver, **options)
+        self._solver_options = options
+        self.timer = timer
         self.method, self.rtol = solver, float(rtol)
         self.newton_iterations = int(newton_iterations)
         self.rebuild_growth = float(rebuild_growth)
         self.rebuild_every = None if rebuild_every is None else int(rebuild_every)
         self.clamp_compression = bool(clamp_compression)
         self.last_solve = None
-        self._pattern = None
-        self._hierarchy_record = None  # (pattern, step, t, dt, x) the current hierarchy was built from
+        self.cache = self.new_cache()
+
+    def new_cache(self) -> SolverCache:
+        """An empty :class:`SolverCache` for one scene (see :mod:`volspring.integrators.cache`)."""
+        return SolverCache(make_linear_solver(self.method, timer=self.timer, **self._solver_options))
+
+    @property
+    def solver(self):
+        """The linear solver of the default cache."""
+        return self.cache.solver
 
     def __repr__(self) -> str:
         return (f"ImplicitEuler(solver={self.method!r}, rtol={self.rtol:g}, "
                 f"newton_iterations={self.newton_iterations})")
 
     # ------------------------------------------------------------------ assembly
-    def pattern(self, scene: Scene) -> BlockPattern:
-        """The block pattern for this scene's model and pins, built once and cached."""
-        cached = self._pattern
-        if cached is None or cached.model is not scene.model or not np.array_equal(cached.free, scene.free):
-            self._pattern = BlockPattern(scene.model, scene.free)
-            self._hierarchy_record = None
-        return self._pattern
+    def pattern(self, scene: Scene, cache: SolverCache | None = None) -> BlockPattern:
+        """The block pattern for this scene's model and supports, built once and cached."""
+        return (self.cache if cache is None else cache).pattern_for(scene)
 
-    def _assemble(self, scene, pattern, x, v, t, h) -> _System:
+    def _assemble(self, scene, pattern, x, v, t, h, prescribed=None) -> _System:
         """Forces and the system matrix at (x, v, t) for step h.
 
-        The spring forces come out of the same pass as the blocks (:func:`linearize_springs`),
-        then every scene force accumulates its own, so ``forces`` equals ``scene.forces_at``.
+        The element sets' forces come out of the same pass as their blocks
+        (:meth:`BlockPattern.linearize`), then the scene adds the external forces, so ``forces``
+        equals ``scene.forces_at``. Held components of partly held nodes are eliminated
+        (:func:`eliminate_held`), with ``prescribed`` (n, 3), the velocity change they must make,
+        moved into the right-hand side.
         """
         springs = linearize_springs(pattern, x, v, stiffness_scale=h * h, damping_scale=h,
                                     clamp_compression=self.clamp_compression)
-        forces = springs.forces
-        for force in scene.forces:
-            force.accumulate(x, v, t, forces)
-        clock = solvers.clock()
-        dfdx = dfdv = None
-        for force in scene.forces:
-            jacobian = getattr(force, "jacobian", None)
-            if jacobian is None:
-                continue
-            jx, jv = jacobian(x, v, t)
-            if jx is not None:
-                dfdx = jx if dfdx is None else dfdx + jx
-            if jv is not None:
-                dfdv = jv if dfdv is None else dfdv + jv
+        forces = scene.external_forces(x, v, t, out=springs.forces)
+        clock = self.timer()
+        dfdx, dfdv = scene.external_jacobian(x, v, t)
         diagonal = scene.model.masses[pattern.free_nodes]
         extra = extra_full = None
         if dfdx is not None or dfdv is not None:
@@ -215,9 +225,17 @@ class ImplicitEuler(Integrator):
                 diagonal = diagonal[:, None] + folded.reshape(-1, 3)
             else:
                 extra = restricted.tocsr()
-        matrix = pattern.matrix(springs.blocks, diagonal)
-        return _System(matrix, extra, springs, forces, solvers.clock() - clock, extra_full,
-                       None if dfdx is None else sp.csr_matrix(dfdx))
+        matrix = pattern.matrix(springs, diagonal)
+        held = held_rhs = None
+        if scene.partly_held:
+            held = held_unknowns(pattern, scene.held)
+            values = np.zeros(pattern.size) if prescribed is None else pattern.restrict(prescribed) * held
+            coupling = matrix @ values + (extra @ values if extra is not None else 0.0)
+            matrix, _, extra = eliminate_held(pattern, matrix, held, extra=extra)
+            # The held unknowns solve to 0 and are set outright (v1 already holds them).
+            held_rhs = np.where(held, 0.0, -coupling)
+        return _System(matrix, extra, springs, forces, self.timer() - clock, extra_full,
+                       None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs)
 
     def linear_system(self, scene: Scene, state: State, dt: float):
         """The linearised system of one step from ``state``, over the free unknowns.
@@ -249,76 +267,77 @@ class ImplicitEuler(Integrator):
             return f"dt changed from {float(memory[_KEY + 'amg_dt']):.3g} s to {dt:.3g} s"
         return ""
 
-    def _hierarchy_matches(self, memory, pattern) -> bool:
-        record = self._hierarchy_record
-        if record is None or self.solver.hierarchy is None or record[0] is not pattern:
-            return False
-        return (record[1] == int(memory[_KEY + "amg_step"]) and record[2] == float(memory[_KEY + "amg_t"])
-                and record[3] == float(memory[_KEY + "amg_dt"]) and np.array_equal(record[4], memory[_KEY + "amg_x"])
-                and np.array_equal(record[5], memory[_KEY + "amg_v"]))
-
-    def _build(self, scene, pattern, system, x, step, t, dt, v):
-        seconds = self.solver.build(system.matrix, rigid_body_modes(x[pattern.free_nodes]))
-        self._hierarchy_record = (pattern, int(step), float(t), float(dt), x.copy(), v.copy())
+    def _build(self, cache, pattern, system, x, step, t, dt, v):
+        # A Jacobian outside the block pattern (contact couples nodes of different bodies) goes into
+        # the hierarchy too, so that the preconditioner sees the contact stiffness CG iterates on.
+        matrix = system.matrix if system.extra is None else \
+            sp.bsr_matrix(system.matrix + system.extra, blocksize=(3, 3))
+        seconds = cache.solver.build(matrix, rigid_body_modes(x[pattern.free_nodes]))
+        cache.built(pattern, step, t, dt, x, v)
         return seconds
 
     # ------------------------------------------------------------------ the step
-    def advance(self, scene: Scene, state: State, dt: float) -> State:
+    def advance(self, scene: Scene, state: State, dt: float, cache: SolverCache | None = None) -> State:
         h = float(dt)
         model = scene.model
+        cache = self.cache if cache is None else cache
         memory = dict(state.memory)
         x0, v0, t0 = state.x, state.v, state.t
-        pattern = self.pattern(scene)
+        pattern = cache.pattern_for(scene)
 
-        clock = solvers.clock()
-        system = self._assemble(scene, pattern, x0, v0, t0, h)
-        f0 = system.forces
-        forces_seconds = solvers.clock() - clock - system.assembly_seconds
-        clock = solvers.clock()
-        # Velocity change of the prescribed nodes: where the pins must be at t + h.
+        # Velocity change of the held components: where the supports must be at t + h.
         v1 = v0.copy()
         dv_prescribed = np.zeros_like(v0)
-        if scene.pins is not None:
-            nodes = scene.pins.nodes
-            v1[nodes] = (scene.pins.positions(model.rest_positions, t0 + h) - x0[nodes]) / h
-            dv_prescribed[nodes] = v1[nodes] - v0[nodes]
+        if scene.all_supports:
+            held = scene.held
+            target, _ = scene.support_motion(t0 + h)
+            v1[held] = (target[held] - x0[held]) / h
+            dv_prescribed[held] = v1[held] - v0[held]
+        clock = self.timer()
+        system = self._assemble(scene, pattern, x0, v0, t0, h, dv_prescribed)
+        f0 = system.forces
+        forces_seconds = self.timer() - clock - system.assembly_seconds
+        clock = self.timer()
         rhs = h * f0 + (h * h) * stiffness_times(pattern, system.springs, v0)
         if system.extra_dfdx is not None:
             rhs += (h * h) * (system.extra_dfdx @ v0.ravel()).reshape(-1, 3)
-        if scene.pins is not None and dv_prescribed.any():
-            rhs += pattern.boundary_coupling(system.springs.blocks, dv_prescribed)
+        if dv_prescribed.any():
+            rhs += pattern.boundary_coupling(system.springs, dv_prescribed)
             if system.extra_full is not None:
                 rhs -= (system.extra_full @ dv_prescribed.ravel()).reshape(-1, 3)
-        b = pattern.restrict(rhs)
-        assembly_seconds = solvers.clock() - clock + system.assembly_seconds
+        b = system.with_held(pattern.restrict(rhs))
+        assembly_seconds = self.timer() - clock + system.assembly_seconds
 
         setup_seconds, rebuilt = 0.0, False
         if self.method == "amg" and pattern.size:
             reason = self._needs_rebuild(memory, pattern, state.step, h)
             if reason:
                 logger.debug("step %d: rebuilding the AMG hierarchy (%s)", state.step, reason)
-                setup_seconds = self._build(scene, pattern, system, x0, state.step, t0, h, v0)
+                setup_seconds = self._build(cache, pattern, system, x0, state.step, t0, h, v0)
                 rebuilt = True
                 memory.update({_KEY + "amg_step": int(state.step), _KEY + "amg_t": float(t0),
                                _KEY + "amg_size": int(pattern.size),
                                _KEY + "amg_dt": h, _KEY + "amg_x": x0.copy(), _KEY + "amg_v": v0.copy()})
-            elif not self._hierarchy_matches(memory, pattern):
-                # Resumed from a checkpoint (or another run used this integrator): rebuild the
-                # hierarchy exactly as it was built, from the recorded state.
+            elif not cache.matches(pattern, memory[_KEY + "amg_step"], memory[_KEY + "amg_t"],
+                                   memory[_KEY + "amg_dt"], memory[_KEY + "amg_x"], memory[_KEY + "amg_v"]):
+                # Resumed from a checkpoint (or a new or unpickled cache): rebuild the hierarchy
+                # exactly as it was built, from the recorded state.
                 x_b, v_b = memory[_KEY + "amg_x"], memory[_KEY + "amg_v"]
                 t_b, h_b = float(memory[_KEY + "amg_t"]), float(memory[_KEY + "amg_dt"])
                 old = self._assemble(scene, pattern, x_b, v_b, t_b, h_b)
-                setup_seconds = self._build(scene, pattern, old, x_b, memory[_KEY + "amg_step"], t_b, h_b, v_b)
+                setup_seconds = self._build(cache, pattern, old, x_b, memory[_KEY + "amg_step"], t_b, h_b, v_b)
 
         warm = memory.get(_KEY + "dv")
         warm = warm if warm is not None and warm.shape == (pattern.size,) else None
         solves = []
         if pattern.size:
-            dv, info = self._solve(system, b, warm)
+            dv, info = self._solve(cache, system, b, warm)
             solves.append(info)
         else:
             dv = np.zeros(0)
             solves.append(SolveInfo(self.method, 0, 0.0, True, self.rtol))
+        if system.held is not None:
+            dv[system.held] = 0.0
         v1[pattern.free_nodes] += dv.reshape(-1, 3)
         x1 = x0 + h * v1
 
@@ -327,12 +346,14 @@ class ImplicitEuler(Integrator):
             for iteration in range(self.newton_iterations + 1):
                 # Residual of M (v1 - v0) = h F(x0 + h v1, v1, t + h), and its Jacobian at the same point.
                 current = self._assemble(scene, pattern, x1, v1, t0 + h, h)
-                residual = pattern.restrict(model.masses[:, None] * (v1 - v0) - h * current.forces)
+                residual = current.with_held(pattern.restrict(model.masses[:, None] * (v1 - v0) - h * current.forces))
                 newton_residuals.append(float(np.linalg.norm(residual)))
                 if iteration == self.newton_iterations:
                     break
-                delta, info = self._solve(current, -residual, None)
+                delta, info = self._solve(cache, current, -residual, None)
                 solves.append(info)
+                if current.held is not None:
+                    delta[current.held] = 0.0
                 v1[pattern.free_nodes] += delta.reshape(-1, 3)
                 x1 = x0 + h * v1
             dv = pattern.restrict(v1 - v0)  # warm start the next step from the converged change
@@ -347,5 +368,5 @@ class ImplicitEuler(Integrator):
             forces_seconds, assembly_seconds, setup_seconds, sum(info.solve_seconds for info in solves), rebuilt)
         return State(x1, v1, t0 + h, state.step + 1, memory)
 
-    def _solve(self, system, b, warm):
-        return self.solver.solve(system.matrix, b, x0=warm, extra=system.extra)
+    def _solve(self, cache, system, b, warm):
+        return cache.solver.solve(system.matrix, b, x0=warm, extra=system.extra)

@@ -110,9 +110,9 @@ class PositionVerlet(_VerletFamily):
 
     Examples
     --------
-    >>> from volspring import Scene, SpringModel
+    >>> from volspring import Scene, Model
     >>> from volspring.integrators import PositionVerlet
-    >>> scene = Scene(SpringModel.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0))
+    >>> scene = Scene(Model.from_arrays([[0, 0, 0], [1, 0, 0]], [1.0, 1.0], [[0, 1]], stiffness=100.0))
     >>> state = scene.initial_state(v=[[0, 0, 0], [1, 0, 0]])
     >>> for _ in range(3):
     ...     state = PositionVerlet().step(scene, state, 1e-3)

@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from volspring._io import atomic_path
+from meshing._io import atomic_path
 
 __all__ = ["BlenderWriter", "BoundarySurface", "read_pc2"]
 
@@ -69,8 +69,8 @@ class BoundarySurface:
 
     @classmethod
     def from_mesh(cls, mesh) -> "BoundarySurface":
-        """The boundary surface of a TetMesh (or of a SpringModel's tet mesh)."""
-        if hasattr(mesh, "topology"):  # a SpringModel: its mesh nodes come first
+        """The boundary surface of a TetMesh (or of a Model's tet mesh)."""
+        if hasattr(mesh, "topology"):  # a Model: its mesh nodes come first
             if mesh.topology is None:
                 raise ValueError("the model has no tet mesh (built from arrays); give a render surface")
             node_count = mesh.node_count
@@ -128,8 +128,8 @@ class BlenderWriter:
     Parameters
     ----------
     directory : path-like -- output folder, created if missing
-    surface : Anchor, BoundarySurface, TetMesh or SpringModel -- what to write: anything with
-        ``deform(x) -> (p, 3)`` and ``faces`` ((k, 3) int or None); a TetMesh or SpringModel
+    surface : Anchor, BoundarySurface, TetMesh or Model -- what to write: anything with
+        ``deform(x) -> (p, 3)`` and ``faces`` ((k, 3) int or None); a TetMesh or Model
         stands for its boundary surface
     name : str -- file name prefix (see the module docstring)
     obj : bool -- write the OBJ sequence (needs faces); default True
@@ -144,7 +144,8 @@ class BlenderWriter:
     Examples
     --------
     >>> import tempfile
-    >>> from volspring import TetMesh, State
+    >>> from meshing import TetMesh
+    >>> from volspring import State
     >>> from volspring.output import BlenderWriter, read_pc2
     >>> mesh = TetMesh([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]])
     >>> writer = BlenderWriter(tempfile.mkdtemp(), mesh)

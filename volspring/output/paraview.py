@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from volspring._io import atomic_path
-from volspring.mesh import signed_tet_volumes
+from meshing._io import atomic_path
+from meshing.geometry import signed_tet_volumes
 
 __all__ = ["ParaViewWriter", "read_pvd", "write_pvd"]
 
@@ -98,7 +98,7 @@ class ParaViewWriter:
     Parameters
     ----------
     directory : path-like -- output folder, created if missing
-    model : SpringModel -- the model being simulated; the tet series needs ``model.topology``
+    model : Model -- the model being simulated; the tet series needs ``model.topology``
         (a model built from arrays has springs only)
     name : str -- file name prefix (see the module docstring for the layout)
     springs : bool -- also write the spring series (default True)
@@ -117,10 +117,11 @@ class ParaViewWriter:
     Examples
     --------
     >>> import tempfile
-    >>> from volspring import Material, Scene, SpringModel, TetMesh
+    >>> from meshing import TetMesh
+    >>> from volspring import Material, Scene, Model
     >>> from volspring.output import ParaViewWriter
     >>> mesh = TetMesh([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]])
-    >>> model = SpringModel.from_mesh(mesh, Material(E=1e5, nu=0.3, density=1000.0))
+    >>> model = Model.from_mesh(mesh, Material(E=1e5, nu=0.3, density=1000.0))
     >>> writer = ParaViewWriter(tempfile.mkdtemp(), model)
     >>> writer(0, Scene(model).initial_state())
     >>> writer.frame_count, writer.pvd_path.name

@@ -23,7 +23,7 @@ Rules applied by :meth:`RunFolder.open`:
 - a folder another running process is writing (its manifest says "running" and names a live
   process on this machine) is refused whatever the options;
 - opening removes the stale temporary files killed writers left
-  (:func:`volspring._io.remove_stale_temporaries`).
+  (:func:`meshing._io.remove_stale_temporaries`).
 
 Writers list a file *before* it appears under its final name (:meth:`RunFolder.record`), so a run
 that dies at any point leaves no file its manifest does not list. The manifest is rewritten
@@ -68,7 +68,7 @@ import shlex
 import socket
 from pathlib import Path, PurePosixPath
 
-from volspring._io import atomic_path, remove_stale_temporaries
+from meshing._io import atomic_path, remove_stale_temporaries
 from volspring._signals import Interrupted
 
 __all__ = ["MANIFEST_NAME", "RunFolder", "RunFolderRefused", "check_output_folder", "read_manifest"]
@@ -411,7 +411,7 @@ class RunFolder:
         """List files in the manifest before they are written.
 
         Call it before a file appears under its final name (before the rename of
-        :func:`volspring._io.atomic_path`), with all the files of one step at once: the manifest
+        :func:`meshing._io.atomic_path`), with all the files of one step at once: the manifest
         is rewritten once per call that brings a new name, and not at all for names listed
         already.
 

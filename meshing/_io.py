@@ -2,8 +2,9 @@
 
 Every writer goes through :func:`atomic_path`: it writes a temporary file beside the target and
 renames it onto the target when the write succeeds. An exception (``KeyboardInterrupt`` and the
-termination signals of :mod:`volspring._signals` included) removes the temporary file; only a
-process killed outright (SIGKILL, a power cut) leaves one behind.
+termination signals that ``volspring._signals`` turns into exceptions included) removes the temporary
+file; only a process killed outright (SIGKILL, a power cut) leaves one behind. It lives in ``meshing``,
+the lowest layer, because the mesh writers use it too.
 
 Such leftovers have a name nobody else uses, so they can be found and removed later
 (:func:`remove_stale_temporaries`)::
@@ -61,7 +62,7 @@ def atomic_path(path):
 
     Notes
     -----
-    On any exception, ``KeyboardInterrupt`` and :class:`volspring._signals.Interrupted`
+    On any exception, ``KeyboardInterrupt`` and ``volspring._signals.Interrupted``
     included, the temporary file is removed and ``path`` is left as it was.
 
     Examples

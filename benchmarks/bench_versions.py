@@ -1,0 +1,135 @@
+"""This checkout's implicit step against a released version, installed in a second venv, timed in one run.
+
+For each size (structured beams of about 1k and 10k nodes, 1 m x 0.2 m x 0.2 m, pinned at x = 0,
+under gravity, E = 1e7 Pa, nu = 0.45 as in the README, dt = 0.01 s) both versions take the same
+steps in child processes launched alternately (baseline, ours, baseline, ours, ...), and the script
+prints the median seconds per step of each and their ratio, and the mean CG iterations per step.
+A contact scene (two cubes, the lower one pinned at its base, the upper one pressed onto it by a
+strong gravity through the penalty contact force) reports the CG iterations per step, where the
+contact stiffness is a non-spring Jacobian.
+
+The baseline is exported from git (``git archive <ref>``) into ``.bench/<ref>/src`` and installed
+into ``.bench/<ref>/venv`` the first time (from PyPI); later runs reuse them.
+
+Run::
+
+    python benchmarks/bench_versions.py                      # v0.1.0, 1k and 10k nodes
+    python benchmarks/bench_versions.py --ref v0.1.0 --nodes 1000 10000 --steps 20 --rounds 3
+
+Every child holds numpy/scipy to one thread. This is a script, not a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import textwrap
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+THREADS = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")}
+
+# The child uses only what both versions offer (0.1 names; ours accepts them with deprecation warnings).
+CHILD = textwrap.dedent('''
+    import json, sys, time, warnings
+    warnings.simplefilter("ignore")
+    import numpy as np
+    from meshing import structured_box
+    import volspring
+    from volspring import Gravity, Material, Pins, Scene
+    from volspring.integrators.implicit import ImplicitEuler
+    Model = getattr(volspring, "Model", None) or volspring.SpringModel
+
+    kind, cells, steps = sys.argv[1], tuple(int(c) for c in sys.argv[2].split(",")), int(sys.argv[3])
+    material = Material(1e7, 0.45, 1000.0)
+    if kind == "beam":
+        mesh = structured_box(cells, (1.0, 0.2, 0.2))
+        model = Model.from_mesh(mesh, material)
+        scene = Scene(model, forces=[Gravity(model.masses)], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+        state = scene.initial_state()
+    else:
+        from volspring.collision import ContactForce
+        from volspring.collision.multibody import Body, assemble_bodies
+        cube = structured_box(cells, (0.2, 0.2, 0.2))
+        system = assemble_bodies([Body(cube, material), Body(cube, material, translation=(0.0, 0.0, 0.199))])
+        model = system.model
+        below = np.flatnonzero(system.model.rest_positions[:, 2] == 0)
+        scene = Scene(model, forces=[Gravity(model.masses, (0, 0, -100.0)), ContactForce(system)], pins=Pins(below))
+        state = scene.initial_state()
+    integrator = ImplicitEuler()
+    for _ in range(3):
+        state = integrator.step(scene, state, 0.01)
+    iterations, start = [], time.perf_counter()
+    for _ in range(steps):
+        state = integrator.step(scene, state, 0.01)
+        iterations.append(integrator.last_solve.iterations)
+    seconds = (time.perf_counter() - start) / steps
+    print(json.dumps({"nodes": model.node_count, "seconds": seconds, "iterations": float(np.mean(iterations))}))
+''')
+
+
+def baseline_python(ref: str) -> Path:
+    """The Python of a venv holding ``ref`` installed, made on first use."""
+    folder = ROOT / ".bench" / ref
+    python = folder / "venv" / "bin" / "python"
+    if python.exists():
+        return python
+    source = folder / "src"
+    source.mkdir(parents=True, exist_ok=True)
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref], check=True, capture_output=True).stdout
+    subprocess.run(["tar", "-x", "-C", str(source)], input=archive, check=True)
+    subprocess.run([sys.executable, "-m", "venv", str(folder / "venv")], check=True)
+    subprocess.run([str(python), "-m", "pip", "install", "-q", str(source)], check=True)
+    return python
+
+
+def run(python: Path, script: Path, kind: str, cells: str, steps: int) -> dict:
+    result = subprocess.run([str(python), str(script), kind, cells, str(steps)], capture_output=True, text=True,
+                            env={**os.environ, **THREADS}, cwd=tempfile.gettempdir())
+    if result.returncode:
+        raise RuntimeError(f"{python} {kind} {cells} failed:\n{result.stderr[-2000:]}")
+    return json.loads(result.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--ref", default="v0.1.0", help="git ref of the baseline (default v0.1.0)")
+    parser.add_argument("--nodes", type=int, nargs="+", default=[1000, 10000], help="beam sizes [nodes]")
+    parser.add_argument("--steps", type=int, default=20, help="timed steps per child")
+    parser.add_argument("--rounds", type=int, default=3, help="alternating child launches per version")
+    parser.add_argument("--contact-cells", default="5,5,5", help="cells of each contact cube")
+    args = parser.parse_args(argv)
+
+    ours, baseline = Path(sys.executable), baseline_python(args.ref)
+    with tempfile.TemporaryDirectory() as folder:
+        script = Path(folder) / "child.py"
+        script.write_text(CHILD)
+        cases = [("beam", _beam_cells(n)) for n in args.nodes] + [("contact", args.contact_cells)]
+        print(f"implicit Euler, dt = 0.01 s, median of {args.rounds} alternating runs of {args.steps} steps")
+        print(f"{'scene':>8} {'nodes':>7} {args.ref + ' [ms]':>14} {'ours [ms]':>10} {'ratio':>6}"
+              f" {'CG ' + args.ref:>10} {'CG ours':>8}")
+        for kind, cells in cases:
+            measured = {"base": [], "ours": []}
+            for _ in range(args.rounds):
+                measured["base"].append(run(baseline, script, kind, cells, args.steps))
+                measured["ours"].append(run(ours, script, kind, cells, args.steps))
+            base = statistics.median(r["seconds"] for r in measured["base"])
+            mine = statistics.median(r["seconds"] for r in measured["ours"])
+            print(f"{kind:>8} {measured['ours'][0]['nodes']:>7} {1e3 * base:>14.2f} {1e3 * mine:>10.2f} "
+                  f"{mine / base:>6.2f} {measured['base'][0]['iterations']:>10.1f} "
+                  f"{measured['ours'][0]['iterations']:>8.1f}")
+
+
+def _beam_cells(nodes: int) -> str:
+    """Cells (5 k, k, k) of a 1 x 0.2 x 0.2 beam with about ``nodes`` nodes: (5k+1)(k+1)^2."""
+    k = max(1, round((nodes / 5) ** (1 / 3)))
+    return f"{5 * k},{k},{k}"
+
+
+if __name__ == "__main__":
+    main()

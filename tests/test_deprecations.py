@@ -1,0 +1,45 @@
+"""Renamed and moved public names keep working for one release, each with a warning naming its new home."""
+
+import importlib
+
+import pytest
+
+RENAMED = [
+    # (module, old name, canonical module, new name)
+    ("volspring", "SpringModel", "volspring", "Model"),
+    ("volspring.model", "SpringModel", "volspring", "Model"),
+    ("volspring.scene", "Gravity", "volspring.forces", "Gravity"),
+    ("volspring.scene", "Drag", "volspring.forces", "Drag"),
+    ("volspring.fields", "Wind", "volspring.forces", "Wind"),
+    ("volspring.fields", "PointAttractor", "volspring.forces", "PointAttractor"),
+    ("volspring.fields", "CallableForce", "volspring.forces", "CallableForce"),
+    ("volspring.mesh", "TetMesh", "meshing", "TetMesh"),
+    ("volspring.mesh", "signed_tet_volumes", "meshing.geometry", "signed_tet_volumes"),
+    ("volspring.mesh", "ZERO_VOLUME", "meshing.tolerances", "ZERO_VOLUME"),
+    ("volspring.units", "UNITS", "meshing.units", "UNITS"),
+    ("volspring.topology", "SpringTopology", "meshing", "SpringTopology"),
+    ("volspring.assembly", "rigid_body_modes", "meshing.geometry", "rigid_body_modes"),
+    ("validation", "solve_static", "validation", "solve_fem_static"),
+    ("validation", "solve_modes", "validation", "solve_fem_modes"),
+    ("validation.fem", "solve_static", "validation.fem", "solve_fem_static"),
+    ("validation.fem_assembly", "stiffness_matrix", "validation.fem_assembly", "fem_stiffness_matrix"),
+    ("validation.fem_solvers", "SolverInfo", "validation.fem_solvers", "ReferenceInfo"),
+]
+
+
+@pytest.mark.parametrize("module, old, home, new", RENAMED)
+def test_an_old_name_warns_names_the_new_one_and_is_the_same_object(module, old, home, new):
+    with pytest.warns(DeprecationWarning, match=rf"{module}\.{old} is deprecated and will be removed in volspring "
+                                                rf"0\.3\.0; use .*{new}") as caught:
+        value = getattr(importlib.import_module(module), old)
+    assert value is getattr(importlib.import_module(home), new)
+    assert caught[0].filename == __file__  # the warning points at the caller
+
+
+def test_unknown_names_are_still_attribute_errors():
+    import volspring
+    import volspring.mesh
+
+    for module in (volspring, volspring.mesh):
+        with pytest.raises(AttributeError, match="has no attribute 'no_such_name'"):
+            module.no_such_name  # noqa: B018

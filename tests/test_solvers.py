@@ -1,0 +1,254 @@
+"""volspring.solvers on its own: the V-cycle adapter against pyamg's public preconditioner, the
+timer, pickling, the two-level cycle, and agreement of the three methods.
+
+The systems are the implicit-step matrix M + h^2 K of a spring network on a structured box, built
+here from the mesh edges (axial springs, 3x3 blocks in BSR), so these tests see only the solvers.
+"""
+
+import pickle
+import time
+
+import numpy as np
+import pyamg
+import pytest
+import scipy.sparse as sp
+from conftest import cube_mesh
+
+from meshing.geometry import rigid_body_modes
+from volspring import solvers
+from volspring.errors import SolverNotConverged
+from volspring.solvers import AMGConjugateGradient, DirectSolver, JacobiConjugateGradient, make_linear_solver
+
+
+def spring_system(cells, *, h_omega=50.0):
+    """(BSR matrix M + h^2 K with h omega ~ ``h_omega``, rigid-body modes, rest points) of a box.
+
+    Unit masses and unit axial springs along every tet edge; the end x = 0 is held by springs to
+    the ground (its diagonal blocks get an extra k I), so K is SPD even without M.
+    """
+    mesh = cube_mesh(cells, (1.0, 0.2, 0.2))
+    points, tets = mesh.points, mesh.tets
+    pairs = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
+    edges = np.unique(np.sort(np.concatenate([tets[:, pair] for pair in pairs]), axis=1), axis=0)
+    direction = points[edges[:, 1]] - points[edges[:, 0]]
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    blocks = direction[:, :, None] * direction[:, None, :]              # (s, 3, 3) k r r^T, k = 1
+    n = len(points)
+    rows = np.concatenate([edges[:, 0], edges[:, 1], edges[:, 0], edges[:, 1]])
+    cols = np.concatenate([edges[:, 0], edges[:, 1], edges[:, 1], edges[:, 0]])
+    data = np.concatenate([blocks, blocks, -blocks, -blocks])
+    held = np.flatnonzero(points[:, 0] < 1e-9)
+    rows, cols = np.concatenate([rows, held]), np.concatenate([cols, held])
+    data = np.concatenate([data, np.broadcast_to(np.eye(3), (len(held), 3, 3))])
+    # Sum duplicate blocks through a scalar COO (BSR construction does not sum them).
+    r = (3 * rows[:, None, None] + np.arange(3)[None, :, None]).repeat(3, axis=2)
+    c = (3 * cols[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
+    stiffness = sp.coo_matrix((data.ravel(), (r.ravel(), c.ravel())), shape=(3 * n, 3 * n)).tocsr()
+    omega_squared = float(abs(stiffness).sum(axis=1).max())               # Gershgorin, unit masses
+    h_squared = h_omega**2 / omega_squared
+    stiffness = (stiffness + stiffness.T) / 2  # exactly symmetric (the sums above round in different orders)
+    matrix = (sp.identity(3 * n, format="csr") + h_squared * stiffness).tobsr(blocksize=(3, 3))
+    return matrix, rigid_body_modes(points), points
+
+
+@pytest.fixture(scope="module")
+def system():
+    return spring_system((24, 5, 5))   # 900 nodes, 2,700 unknowns: three AMG levels
+
+
+@pytest.fixture(scope="module")
+def rhs(system):
+    return np.random.default_rng(0).standard_normal(system[0].shape[0])
+
+
+def test_spring_system_is_spd():
+    matrix = spring_system((8, 2, 2))[0].toarray()  # the fixture's construction, small enough for a dense check
+    np.testing.assert_array_equal(matrix, matrix.T)
+    assert np.linalg.eigvalsh(matrix)[0] >= 1.0 - 1e-9  # M + h^2 K with K >= 0 and M = I
+
+
+@pytest.mark.parametrize("smoother", ["gauss_seidel", "jacobi"])
+def test_v_cycle_adapter_equals_pyamg_public_preconditioner_bit_for_bit(system, rhs, smoother):
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient(smoother=smoother)
+    solver.build(matrix, modes)
+    assert len(solver.hierarchy.levels) > 1
+    public = solver.hierarchy.aspreconditioner(cycle="V")
+    assert solver.precondition(rhs).tobytes() == public.matvec(rhs).tobytes()
+    # And so the whole CG solve: the same iterates, the same answer.
+    x, info = solver.solve(matrix, rhs)
+    y, iterations, _, _ = solvers.conjugate_gradient(matrix.__matmul__, rhs, preconditioner=public.matvec,
+                                                     rtol=solver.rtol, maxiter=solver.maxiter)
+    assert x.tobytes() == y.tobytes() and info.iterations == iterations
+
+
+def test_v_cycle_adapter_falls_back_to_the_public_preconditioner_for_other_pyamg_versions(monkeypatch, system, rhs):
+    matrix, modes, _ = system
+    known = AMGConjugateGradient()
+    known.build(matrix, modes)
+    calls = []
+    original = pyamg.multilevel.MultilevelSolver.solve
+
+    def counted(self, *args, **kwargs):
+        calls.append(kwargs.get("maxiter"))
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(pyamg.multilevel.MultilevelSolver, "solve", counted)
+    known.precondition(rhs)
+    assert calls == [], "a checked pyamg version should run the cycle without ml.solve"
+    for version in ("6.0.0", "4.2.3", "not a version"):
+        monkeypatch.setattr(pyamg, "__version__", version)
+        other = AMGConjugateGradient()
+        other.build(matrix, modes)
+        calls.clear()
+        assert other.precondition(rhs).tobytes() == known.precondition(rhs).tobytes()
+        assert calls == [1], f"pyamg {version}: expected the public aspreconditioner (ml.solve, maxiter=1)"
+
+
+def test_the_three_methods_agree(system, rhs):
+    matrix, modes, _ = system
+    exact = sp.linalg.spsolve(matrix.tocsc(), rhs)
+    for method in ("direct", "amg", "jacobi"):
+        solver = make_linear_solver(method, **({} if method == "direct" else {"rtol": 1e-10, "maxiter": 5000}))
+        x, info = solver.solve(matrix, rhs, **({"near_null_space": modes} if method == "amg" else {}))
+        assert info.method == method and info.converged
+        # The matrix is well conditioned (eigenvalues in [1, 2.5e3]): a 1e-10 residual is an error below
+        # 1e-10 * cond = 2.5e-7 of |x|; LU is at round-off.
+        np.testing.assert_allclose(x, exact, atol=1e-6 * np.abs(exact).max())
+
+
+def test_amg_needs_far_fewer_iterations_than_jacobi(system, rhs):
+    matrix, modes, _ = system
+    amg = AMGConjugateGradient(rtol=1e-6).solve(matrix, rhs, near_null_space=modes)[1]
+    jacobi = JacobiConjugateGradient(rtol=1e-6, maxiter=5000).solve(matrix, rhs)[1]
+    # Measured 10 against 150 at h omega = 50; a factor of 5 fails a regression to a broken hierarchy.
+    assert 0 < 5 * amg.iterations < jacobi.iterations
+
+
+class _Ticks:
+    """A timer that advances one second per call: every *_seconds figure must come from it."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self):
+        self.calls += 1
+        return float(self.calls)
+
+
+@pytest.mark.parametrize("method", ["direct", "amg", "jacobi"])
+def test_every_seconds_figure_comes_from_the_solver_timer(monkeypatch, system, rhs, method):
+    matrix, modes, _ = system
+    assert not hasattr(solvers, "clock")  # no module-level timer to reassign: each solver has its own
+    timer = _Ticks()
+    solver = make_linear_solver(method, timer=timer)
+    assert solver.timer is timer
+    _, info = solver.solve(matrix, rhs, **({"near_null_space": modes} if method == "amg" else {}))
+    assert timer.calls >= 3
+    # Whole numbers of ticks: nothing timed by another clock slipped in.
+    for seconds in (info.setup_seconds, info.solve_seconds):
+        assert seconds >= 0 and seconds == int(seconds)
+    assert info.setup_seconds >= 1 and info.solve_seconds >= 1
+
+
+def test_default_timer_is_perf_counter_and_a_bad_timer_is_refused():
+    assert AMGConjugateGradient().timer is time.perf_counter
+    assert DirectSolver().timer is time.perf_counter
+    with pytest.raises(TypeError, match="timer = 1.0 is not callable"):
+        JacobiConjugateGradient(timer=1.0)
+
+
+@pytest.mark.parametrize("method", ["direct", "amg", "jacobi"])
+def test_solver_round_trips_through_pickle_and_solves_to_the_same_answer(system, rhs, method):
+    matrix, modes, _ = system
+    options = {} if method == "direct" else {"rtol": 1e-8, "timer": time.process_time}
+    solver = make_linear_solver(method, **options)
+    extra = {"near_null_space": modes} if method == "amg" else {}
+    before, info_before = solver.solve(matrix, rhs, **extra)
+    copy = pickle.loads(pickle.dumps(solver))
+    assert type(copy) is type(solver) and copy.rtol == solver.rtol and copy.timer is solver.timer
+    if method == "amg":
+        # The pyamg hierarchy does not pickle (closures): dropped, then rebuilt from the kept matrix.
+        assert copy.hierarchy is None and solver.hierarchy is not None
+    after, info_after = copy.solve(matrix, rhs)  # no near_null_space: the rebuild needs none
+    assert after.tobytes() == before.tobytes()  # deterministic rebuild: the same bits, not just close
+    assert info_after.iterations == info_before.iterations
+    if method == "amg":
+        assert info_after.rebuilt and copy.build_count == solver.build_count + 1
+        assert len(copy.hierarchy.levels) == len(solver.hierarchy.levels)
+        # A second pickle of the rebuilt solver, and one of a solver never built, work too.
+        assert pickle.loads(pickle.dumps(copy)).solve(matrix, rhs)[0].tobytes() == before.tobytes()
+        assert pickle.loads(pickle.dumps(AMGConjugateGradient())).hierarchy is None
+
+
+def test_unbuilt_amg_refuses_to_precondition_or_solve_without_modes(system, rhs):
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient()
+    with pytest.raises(ValueError, match="not built"):
+        solver.precondition(rhs)
+    with pytest.raises(ValueError, match="near_null_space"):
+        solver.solve(matrix, rhs)
+    with pytest.raises(ValueError, match=r"near_null_space has shape \(5, 6\), expected \(2700, k\)"):
+        solver.build(matrix, modes[:5])
+
+
+def test_two_level_cycle_on_a_galerkin_coarse_space(system, rhs):
+    """prolongation P: AMG on P^T A P, Gauss-Seidel on A around it; CG still converges to the answer."""
+    matrix, _, points = system
+    # Coarse space: every other node along x, interpolated linearly in x (a 1D geometric P per component).
+    xs = np.unique(points[:, 0])
+    coarse_x = xs[::2]
+    keys = np.round(points[:, 1:] * 1e6).astype(np.int64)
+    _, line = np.unique(keys, axis=0, return_inverse=True)
+    line = line.ravel()
+    coarse_points = np.array([[x, *points[line == k][0, 1:]] for k in range(line.max() + 1) for x in coarse_x])
+    coarse_index = {(k, i): k * len(coarse_x) + i for k in range(line.max() + 1) for i in range(len(coarse_x))}
+    rows, cols, vals = [], [], []
+    for node, (x, k) in enumerate(zip(points[:, 0], line)):
+        i = min(np.searchsorted(coarse_x, x, side="right") - 1, len(coarse_x) - 2)
+        t = (x - coarse_x[i]) / (coarse_x[i + 1] - coarse_x[i])
+        for j, w in ((i, 1 - t), (i + 1, t)):
+            if w:
+                for c in range(3):
+                    rows.append(3 * node + c), cols.append(3 * coarse_index[k, j] + c), vals.append(w)
+    prolongation = sp.csr_matrix((vals, (rows, cols)), shape=(matrix.shape[0], 3 * len(coarse_points)))
+    solver = AMGConjugateGradient(rtol=1e-8, maxiter=300)
+    x, info = solver.solve(matrix, rhs, near_null_space=rigid_body_modes(coarse_points), prolongation=prolongation)
+    exact = sp.linalg.spsolve(matrix.tocsc(), rhs)
+    np.testing.assert_allclose(x, exact, atol=1e-5 * np.abs(exact).max())  # 1e-8 residual x cond 2.5e3, with margin
+    assert solver.hierarchy.levels[0].A.shape == (prolongation.shape[1],) * 2
+    # The preconditioner is symmetric (forward sweep, coarse correction, backward sweep), as CG needs.
+    u, v = np.random.default_rng(1).standard_normal((2, matrix.shape[0]))
+    assert np.dot(u, solver.precondition(v)) == pytest.approx(np.dot(v, solver.precondition(u)), rel=1e-10)
+    # And it pickles like the plain one.
+    assert pickle.loads(pickle.dumps(solver)).solve(matrix, rhs)[0].tobytes() == x.tobytes()
+    with pytest.raises(ValueError, match="prolongation has shape"):
+        AMGConjugateGradient().build(matrix, rigid_body_modes(coarse_points), prolongation=prolongation[:10])
+
+
+def test_a_solve_that_stops_short_raises_or_warns_with_the_residual(system, rhs):
+    matrix, modes, _ = system
+    with pytest.raises(SolverNotConverged, match=r"stopped after 2 iterations at relative residual [0-9.e-]+"):
+        AMGConjugateGradient(rtol=1e-12, maxiter=2).solve(matrix, rhs, near_null_space=modes)
+    with pytest.warns(RuntimeWarning, match="stopped after 2 iterations"):
+        x, info = JacobiConjugateGradient(rtol=1e-12, maxiter=2, on_failure="warn").solve(matrix, rhs)
+    assert not info.converged and info.residual > 1e-12
+
+
+def test_implicit_integrator_with_a_built_hierarchy_pickles_and_continues_bit_for_bit():
+    """What the solver's pickling is for: an integrator (with its scene and state) sent to a worker."""
+    from volspring import Gravity, Material, Model, Pins, Scene
+    from volspring.integrators.implicit import ImplicitEuler
+
+    model = Model.from_mesh(cube_mesh((12, 3, 3), (1.0, 0.2, 0.2)), Material(1e6, 0.45, 1100.0))
+    scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(model.rest_positions[:, 0] < 1e-9)))
+    integrator = ImplicitEuler()
+    state = scene.initial_state()
+    for _ in range(2):
+        state = integrator.step(scene, state, 0.01)
+    assert integrator.solver.hierarchy is not None
+    scene_copy, integrator_copy, state_copy = pickle.loads(pickle.dumps((scene, integrator, state)))
+    for _ in range(2):
+        state = integrator.step(scene, state, 0.01)
+        state_copy = integrator_copy.step(scene_copy, state_copy, 0.01)
+    assert state.x.tobytes() == state_copy.x.tobytes() and state.v.tobytes() == state_copy.v.tobytes()

@@ -1,0 +1,208 @@
+"""Run the validation cases and studies and collect their results.
+
+:func:`run_validation` runs the built-in cases (:mod:`validation.cases`, compared by
+:mod:`validation.compare`), the studies (:mod:`validation.studies`) and optionally a user's own
+mesh; it returns the results as plain JSON numbers, every key naming its unit, with the
+comparisons the VTU files are made of (written by :mod:`validation.report.outputs`).
+
+results.json layout (units in the key names: ``_m``, ``_m3``, ``_hz``, ``_pa``, ``_s``,
+``_n_per_m``; ``*_error`` are signed relative errors, (value - reference) / |reference|, 0.01 = 1%):
+
+- ``schema``, ``created``, ``command``, ``quick``, ``versions`` (python, numpy, scipy, scikit-fem,
+  pyamg, meshio, matplotlib, volspring), ``units``, ``notes``;
+- ``cases.<name>``: ``parameters``, ``mesh`` (node_count, tet_count, cells), ``analytic``,
+  ``fem.P2`` / ``fem.P1`` (tip_deflection_m, volume_change_m3, deformed_volume_change_m3, ...),
+  ``springs.<rule>`` (tip_deflection_m, tip_deflection_error, rms_displacement_error,
+  max_displacement_error, volume_change_m3, volume_change_error_vs_fem,
+  volume_change_error_vs_analytic, solver, ...), ``beam_profile`` for beams, ``sweep`` for the
+  compression case; modal case: ``fem.P2.frequencies_hz``, ``springs.<rule>.frequencies_hz``,
+  ``first_frequency_error``;
+- ``studies.refinement``, ``studies.speed``, ``studies.cauchy`` (see :mod:`validation.studies`);
+- ``headline.<rule>``: the figures the README quotes;
+- ``files``: the VTU files written and the models in them (added by
+  :func:`~validation.report.outputs.write_outputs`).
+"""
+
+from __future__ import annotations
+
+import datetime
+import platform
+
+from validation import studies
+from validation.cases import build_case, uniaxial_compression
+from validation.compare import RULES, compare_modes, compare_static
+
+__all__ = ["BUILT_IN", "NOTES", "SCHEMA", "STATIC_CASES", "STUDIES", "SWEEP_NUS", "SWEEP_STRAINS", "UNITS",
+           "run_validation", "versions"]
+
+SCHEMA = "volspring-validate/1"
+STATIC_CASES = ("cantilever_gravity", "cantilever_end_load", "hanging_bar", "uniaxial_compression")
+BUILT_IN = STATIC_CASES + ("cantilever_modes",)
+STUDIES = ("refinement", "speed", "cauchy")
+#: Poisson ratios and axial strains of the compression sweep (volume change against strain).
+SWEEP_NUS = (0.0, 0.3, 0.45, 0.49)
+SWEEP_STRAINS = (-0.0025, -0.005, -0.01)
+
+UNITS = {"_m": "metre", "_m3": "cubic metre", "_hz": "hertz", "_pa": "pascal", "_s": "second",
+         "_n": "newton", "_n_per_m": "newton per metre", "_kg_per_m3": "kilogram per cubic metre",
+         "_m_per_s2": "metre per second squared", "_per_s": "1 / second", "_rad_per_s": "radian per second",
+         "_error": "relative error (value - reference) / |reference|, dimensionless (0.01 = 1%)",
+         "nu": "Poisson ratio, dimensionless", "strain": "dimensionless"}
+
+NOTES = [
+    "Spring stiffness rules: van_gelder and lloyd from E (nu is not used by either rule); uniform gives every "
+    "spring one constant, the mean van_gelder constant of the same mesh.",
+    "Spring statics: Newton on the nonlinear springs (volspring.statics) where the clamps hold whole nodes; the "
+    "compression case has sliding supports, which volspring.Pins cannot hold, so its spring side is the "
+    "linearised solve with the rest stiffness (exact in the small-strain limit).",
+    "FEM reference: P2 tetrahedra on the same mesh (scikit-fem), cached on disk; P1 shown for comparison (it "
+    "locks in bending).",
+    "Structured meshes split each cell into six Kuhn tets, mirrored in alternate cells: a network on the "
+    "unmirrored Kuhn grid couples stretch to shear (a hanging bar sways sideways).",
+    "Loads are chosen so that the largest displacement stays about 0.5% of the length: linear elasticity "
+    "is the right reference there.",
+]
+
+
+def versions() -> dict:
+    """Versions of Python and the libraries the numbers depend on."""
+    import importlib.metadata as metadata
+
+    found = {"python": platform.python_version()}
+    for name, distribution in (("numpy", "numpy"), ("scipy", "scipy"), ("scikit-fem", "scikit-fem"),
+                               ("pyamg", "pyamg"), ("meshio", "meshio"), ("matplotlib", "matplotlib")):
+        try:
+            found[name] = metadata.version(distribution)
+        except metadata.PackageNotFoundError:
+            found[name] = None
+    import volspring
+
+    found["volspring"] = volspring.__version__
+    return found
+
+
+def _settings(quick: bool) -> dict:
+    """What ``--quick`` trims. The speed study runs five periods of the loaded mode with a drag that
+    leaves 5e-5 of the motion at the end (a damping ratio of 0.32): its cost is the step count, so
+    the full run's finer beam (twice omega_max, half the critical step) gets the same simulated
+    time, not more. Measured on 2 cores: quick about 25 s, full about 90 s (three quarters of it the
+    speed study; up to 3 minutes on a shared machine)."""
+    if quick:
+        return {"refinement_levels": (1, 2), "reference_level": 4, "speed_per_height": 1,
+                "speed_steps": studies.QUICK_INTEGRATOR_STEPS, "speed_periods": 5.0,
+                "speed_residual_amplitude": 5e-5, "cauchy_cells": 3}
+    return {"refinement_levels": (1, 2, 3, 4), "reference_level": 6, "speed_per_height": 2,
+            "speed_steps": studies.INTEGRATOR_STEPS, "speed_periods": 5.0, "speed_residual_amplitude": 5e-5,
+            "cauchy_cells": 4}
+
+
+def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULES, folder=None,
+                   progress=None) -> tuple:
+    """Run cases and studies.
+
+    Parameters
+    ----------
+    cases : sequence of str, optional -- built-in case and study names (``BUILT_IN`` and ``STUDIES``);
+        default all of them, or none when ``own_case`` is given
+    quick : bool -- coarse meshes and short runs (about a minute in all)
+    own_case : Case, optional -- a user's mesh (:func:`validation.cases.own_mesh_case`)
+    rules : sequence of str -- spring stiffness rules
+    folder : path, optional -- FEM cache folder
+    progress : callable, optional -- ``progress(fraction, message)``, fraction in [0, 1]
+
+    Returns
+    -------
+    (results, artefacts) -- results: JSON-ready dict (module docstring); artefacts: the
+    :class:`~validation.compare.Comparison` of each case, for VTU files
+    """
+    if cases is None or len(cases) == 0:
+        cases = () if own_case is not None else BUILT_IN + STUDIES
+    unknown = [name for name in cases if name not in BUILT_IN + STUDIES]
+    if unknown:
+        raise ValueError(f"unknown case {unknown[0]!r}; known: {', '.join(BUILT_IN + STUDIES)}")
+    settings = _settings(quick)
+    weights = {"cantilever_gravity": 1, "cantilever_end_load": 1, "hanging_bar": 1, "uniaxial_compression": 2,
+               "cantilever_modes": 1, "refinement": 4, "speed": 12 if quick else 40, "cauchy": 1, "own_mesh": 3}
+    tasks = list(cases) + (["own_mesh"] if own_case is not None else [])
+    total = float(sum(weights[name] for name in tasks))
+    done = 0.0
+    report = progress or (lambda fraction, message: None)
+
+    def note(message):
+        report(min(done / total, 1.0), message)
+
+    results = {"schema": SCHEMA, "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+               "quick": bool(quick), "versions": versions(), "units": UNITS, "notes": NOTES, "rules": list(rules),
+               "settings": {key: value for key, value in settings.items() if key != "speed_steps"},
+               "cases": {}, "studies": {}}
+    results["settings"]["speed_steps"] = {key: list(value) for key, value in settings["speed_steps"].items()}
+    artefacts = {}
+    for name in tasks:
+        note(name)
+        if name in STATIC_CASES or name == "own_mesh":
+            case = own_case if name == "own_mesh" else build_case(name, quick=quick)
+            comparison = compare_static(case, rules=rules, folder=folder, progress=note)
+            results["cases"][name] = comparison.results
+            artefacts[name] = comparison
+            if name == "uniaxial_compression":
+                results["cases"][name]["sweep"] = _compression_sweep(quick, rules, folder, note)
+        elif name == "cantilever_modes":
+            comparison = compare_modes(build_case(name, quick=quick), rules=rules, folder=folder, progress=note)
+            results["cases"][name] = comparison.results
+            artefacts[name] = comparison
+        elif name == "refinement":
+            results["studies"]["refinement"] = studies.refinement_study(
+                settings["refinement_levels"], reference_level=settings["reference_level"], rules=rules,
+                folder=folder, progress=note)
+        elif name == "speed":
+            results["studies"]["speed"] = studies.speed_study(
+                per_height=settings["speed_per_height"], steps=settings["speed_steps"],
+                periods=settings["speed_periods"], residual_amplitude=settings["speed_residual_amplitude"],
+                folder=folder, progress=note)
+        elif name == "cauchy":
+            results["studies"]["cauchy"] = studies.cauchy_study(cells=settings["cauchy_cells"], rules=rules)
+        done += weights[name]
+    results["headline"] = _headline(results, rules)
+    report(1.0, "done")
+    return results, artefacts
+
+
+def _compression_sweep(quick, rules, folder, note) -> dict:
+    """Volume change against axial strain for several nu: FEM P2, springs (linearised), closed form."""
+    cells = 3 if quick else 4
+    rows = []
+    for nu in SWEEP_NUS:
+        for strain in SWEEP_STRAINS:
+            note(f"uniaxial_compression: nu = {nu:g}, strain = {strain:g}")
+            comparison = compare_static(uniaxial_compression(cells=cells, nu=nu, strain=strain), rules=rules,
+                                        elements=("P2",), folder=folder)
+            volume = comparison.case.mesh.volume
+            rows.append({"nu": nu, "strain": strain, "analytic_volume_strain": (1 - 2 * nu) * strain,
+                         "fem_P2_volume_strain": comparison.results["fem"]["P2"]["deformed_volume_change_m3"] / volume,
+                         **{f"springs_{rule}_volume_strain": comparison.results["springs"][rule]["volume_change_m3"]
+                            / volume for rule in rules}})
+    return {"cells": cells, "rows": rows}
+
+
+def _headline(results, rules) -> dict:
+    cases = results["cases"]
+    cauchy = results["studies"].get("cauchy")
+    headline = {}
+    for rule in rules:
+        row = {}
+        for name in ("cantilever_gravity", "cantilever_end_load", "hanging_bar", "own_mesh"):
+            if name in cases:
+                row[f"{name}_tip_deflection_error"] = cases[name]["springs"][rule]["tip_deflection_error"]
+        for name in ("hanging_bar", "uniaxial_compression", "own_mesh"):
+            if name in cases:
+                row[f"{name}_volume_change_error_vs_fem"] = cases[name]["springs"][rule]["volume_change_error_vs_fem"]
+        if "cantilever_modes" in cases:
+            row["first_frequency_error"] = cases["cantilever_modes"]["springs"][rule]["first_frequency_error"]
+        if cauchy:
+            mirrored = [m for m in cauchy["measurements"] if m["rule"] == rule and m["pattern"] == "mirrored"]
+            if mirrored:
+                row["nu_effective"] = mirrored[0]["nu_effective"]
+                row["E_effective_ratio"] = mirrored[0]["E_ratio"]
+        headline[rule] = row
+    return headline
+

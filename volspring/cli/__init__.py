@@ -1,0 +1,34 @@
+"""``volspring-sim``: a minimal simulation from the command line.
+
+A mesh file (any volume format meshio reads), a spring topology file from ``volspring-mesh``
+(``NAME.vstopo.npz``: the tet mesh with its shells, which the model then has) or a built-in shape
+(``box:1,0.1,0.1``), a material, pins by regions (``--pin xmin``, ``--pin "x<0.01"``,
+``--pin XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX``: :func:`volspring.regions.parse_region`), gravity, an integrator and a step; frames written as a
+ParaView series (and optionally a Blender surface cache), checkpoints to resume from, a progress bar
+on stderr and a summary on stdout. A fuller scene format is for a later version.
+
+Exit status: 0 success, 1 bad input or failed run (one ``volspring-sim: error: ...`` line on
+stderr), 2 bad command line, 3 the simulation diverged (the output folder then holds only the
+complete frames before it), 130 Ctrl-C and 143 SIGTERM (129 SIGHUP): one line saying where the
+run stopped, its last checkpoint and the command that resumes it; no traceback, no temporary file.
+
+The command reads in one direction, one module a step: :mod:`~volspring.cli._arguments` (the
+options and their checks) -> :mod:`~volspring.cli._build` (mesh, model, scene) ->
+:mod:`~volspring.cli._run` (output folder, stepping, frames, checkpoints) ->
+:mod:`~volspring.cli._terminal` (progress bar, summary, one-line errors).
+
+Examples
+--------
+>>> import tempfile
+>>> from volspring.cli import main
+>>> main(["box:0.2,0.05,0.05", "--size", "0.05", "--pin", "-0.1,-1,-1,-0.1,1,1",
+...       "--duration", "0.01", "--dt", "0.005", "--out", tempfile.mkdtemp(), "--quiet"])
+0
+>>> main(["box:0.2,0.05,0.05", "--size", "0.05", "--pin", "xmin", "--duration", "0.01", "--quiet"])
+0
+"""
+
+from volspring.cli._arguments import build_parser
+from volspring.cli._run import main
+
+__all__ = ["main", "build_parser"]

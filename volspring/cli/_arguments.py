@@ -1,0 +1,172 @@
+"""The command line of ``volspring-sim``: its options, and the checks of their values before any work.
+
+The parser reports a bad command line by raising :class:`UsageError` (exit status 2) instead of
+printing its usage and exiting, and values that parse but make no sense raise :class:`InputError`
+(exit status 1), each reported by :func:`volspring.cli.main` in one line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+__all__ = ["InputError", "UsageError", "build_parser", "check_arguments", "joined_vectors"]
+
+PROG = "volspring-sim"
+CHECKPOINT_NAME = "checkpoint.npz"
+SERIES_NAME = "frame"
+SURFACE_NAME = "surface"
+EXIT_INPUT, EXIT_USAGE, EXIT_DIVERGED = 1, 2, 3
+DEFAULT_NU = 0.45
+VECTOR_OPTIONS = ("--pin", "--gravity")  # values that may start with a minus sign (-0.1,-1,-1,... or -9.81)
+PIN_FORMS = ("XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (a box; also box:...), xmin|xmax|ymin|ymax|zmin|zmax (a face of the "
+             "body's bounding box), x<V, x>V (a half-space; <=, >= too) or x=V (a plane), any axis")
+
+
+class UsageError(Exception):
+    """A bad command line (argparse's complaint), reported in one line."""
+
+
+class InputError(Exception):
+    """Bad input found after parsing, reported in one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse would print the usage and exit; we report one line
+        raise UsageError(message)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``volspring-sim``.
+
+    Examples
+    --------
+    >>> args = build_parser().parse_args(["box:1,0.1,0.1", "--pin=xmin", "--dt", "0.01"])
+    >>> args.pin, args.dt, args.integrator
+    (['xmin'], 0.01, 'implicit_euler')
+    """
+    from volspring.integrators import INTEGRATORS
+    from volspring.model import STIFFNESS_RULES
+    from volspring.simulate import RUNAWAY_CHECKS, RUNAWAY_FACTOR
+    from volspring.output.run_folder import MANIFEST_NAME as MANIFEST
+    from meshing.units import add_unit_arguments
+
+    parser = _Parser(prog=PROG, description="Simulate a volumetric soft body as a tetrahedral mass-spring model.",
+                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument("input", metavar="INPUT",
+                        help="a volume mesh file (.msh, .vtu, .mesh, ...), a spring topology file from "
+                             "volspring-mesh (.vstopo.npz, any .npz: the tet mesh with its shells, which the model "
+                             "then has), or a built-in shape NAME:D1,D2,... such as box:1,0.1,0.1 or sphere:0.5 [m]")
+    body = parser.add_argument_group("body")
+    body.add_argument("--size", type=float, help="tet edge length for a built-in shape, in --units "
+                                                 "(default: a tenth of its extent, at most half its smallest side)")
+    body.add_argument("--mesher", choices=("gmsh", "delaunay"), default="gmsh", help="mesher for a built-in shape")
+    body.add_argument("--seed", type=int, help="random seed of the mesher")
+    add_unit_arguments(body, applies_to="INPUT (a mesh file's coordinates or a shape's dimensions), --size, the --pin "
+                                        "numbers and --render-surface", scale_applies_to="INPUT and --render-surface")
+    body.add_argument("--E", type=float, default=1e6, help="Young's modulus [Pa] (soft rubber)")
+    body.add_argument("--nu", type=float, default=None,
+                      help=f"Poisson's ratio [-] (default {DEFAULT_NU}); the spring rules ignore it: pure springs have "
+                           "one effective Poisson ratio whatever nu is asked (the Cauchy limit), and say so when "
+                           "--nu is given")
+    body.add_argument("--density", type=float, default=1100.0, help="density [kg/m^3]")
+    body.add_argument("--rule", choices=STIFFNESS_RULES, default="van_gelder", help="spring stiffness rule")
+    body.add_argument("--stiffness", type=float, help="the raw spring constant of --rule uniform [N/m]")
+    body.add_argument("--damping-ratio", type=float, default=0.05, help="damping ratio of every spring [-]")
+    scene = parser.add_argument_group("scene")
+    scene.add_argument("--gravity", default="0,0,-9.81", help="gravity gx,gy,gz [m/s^2], or 'off'")
+    scene.add_argument("--drag", type=float, default=0.0, help="global viscous drag rate [1/s]")
+    scene.add_argument("--pin", action="append", default=[], metavar="REGION",
+                       help=f"pin the nodes in this region, numbers in --units (repeatable): {PIN_FORMS}")
+    run = parser.add_argument_group("run")
+    run.add_argument("--integrator", choices=tuple(INTEGRATORS), default="implicit_euler")
+    run.add_argument("--dt", type=float, default=1e-3, help="time step [s]")
+    run.add_argument("--duration", type=float, default=1.0, help="end time of the run [s]")
+    run.add_argument("--frame-dt", type=float, default=0.04, help="time between frames [s]")
+    run.add_argument("--guard", choices=("warn", "raise", "off"), default="warn",
+                     help="what a step beyond an explicit integrator's stability limit does")
+    run.add_argument("--newton-iterations", type=int, default=0, metavar="N",
+                     help="implicit_euler: Newton iterations on the nonlinear step after the linearised one "
+                          "(0: Baraff-Witkin); more follow large rotations more closely at large --dt")
+    run.add_argument("--runaway-factor", type=float, default=None, metavar="F",
+                     help="divergence check: the run has diverged when its energy exceeds the start energy plus "
+                          "the work of forces and moving pins by more than F times the start's energy scale and "
+                          f"keeps growing over {RUNAWAY_CHECKS} checks (default {RUNAWAY_FACTOR:g}); 'inf' turns the "
+                          "energy check off (NaN and Inf are always caught)")
+    output = parser.add_argument_group("output")
+    output.add_argument("--out", type=Path, metavar="DIR",
+                        help=f"write the frames there ({SERIES_NAME}.pvd: tets, {SERIES_NAME}_springs.pvd: springs)")
+    output.add_argument("--blender", action="store_true",
+                        help=f"also write the boundary surface as {SURFACE_NAME}_NNNN.obj and {SURFACE_NAME}.pc2")
+    output.add_argument("--render-surface", type=Path, metavar="FILE",
+                        help="with --blender: write this surface mesh (.obj, .stl, .ply, ...) carried along by the "
+                             "tets instead of their boundary; its vertex order is kept for Blender's Mesh Cache")
+    output.add_argument("--checkpoint-every", type=int, metavar="N",
+                        help=f"save {CHECKPOINT_NAME} in DIR every N frames and at the end")
+    output.add_argument("--resume", type=Path, metavar="CHECKPOINT",
+                        help="continue a run from its checkpoint up to --duration; the checkpoint records the "
+                             "model, integrator and --dt of its run, and a resume with another INPUT, material, "
+                             "pins, integrator or --dt is refused, naming what differs (a resumed run is "
+                             "bit-identical to one that never stopped)")
+    output.add_argument("--overwrite", action="store_true",
+                        help="replace the outputs of an earlier run in DIR: only the files its manifest "
+                             f"({MANIFEST}) lists are removed, never anything volspring did not write (without "
+                             "it, a DIR holding another run's outputs, or files of unknown origin, is refused)")
+    output.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
+                        help="progress bar on stderr (default: when stderr is a terminal)")
+    output.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary")
+    return parser
+
+
+def joined_vectors(argv) -> list:
+    """``--pin -1,0,0,...`` as ``--pin=-1,0,0,...``: argparse takes a value starting with ``-`` for an option.
+
+    Examples
+    --------
+    >>> joined_vectors(["beam.vtu", "--pin", "-1,-1,-1,0,1,1", "--gravity", "0,0,-1"])
+    ['beam.vtu', '--pin=-1,-1,-1,0,1,1', '--gravity=0,0,-1']
+    """
+    argv, joined = [str(token) for token in argv], []
+    index = 0
+    while index < len(argv):
+        token = argv[index]
+        if token in VECTOR_OPTIONS and index + 1 < len(argv):
+            joined.append(f"{token}={argv[index + 1]}")
+            index += 2
+        else:
+            joined.append(token)
+            index += 1
+    return joined
+
+
+def check_arguments(args) -> None:
+    """Raise :class:`InputError` for option values that parse but make no sense, or options missing
+    the option they need, before any work."""
+    for name in ("dt", "frame_dt"):
+        value = getattr(args, name)
+        if not (math.isfinite(value) and value > 0):
+            raise InputError(f"--{name.replace('_', '-')} = {value:g} s is not a finite number > 0")
+    if not (math.isfinite(args.duration) and args.duration >= 0):
+        raise InputError(f"--duration = {args.duration:g} s is not a finite number >= 0")
+    if args.size is not None and not (math.isfinite(args.size) and args.size > 0):
+        raise InputError(f"--size = {args.size:g} m is not a finite number > 0")
+    if args.checkpoint_every is not None:
+        if args.checkpoint_every < 1:
+            raise InputError(f"--checkpoint-every = {args.checkpoint_every} is not >= 1 (frames)")
+        if args.out is None:
+            raise InputError("--checkpoint-every needs --out DIR to write the checkpoint in")
+    if args.blender and args.out is None:
+        raise InputError("--blender needs --out DIR to write the surface cache in")
+    if args.render_surface is not None and not args.blender:
+        raise InputError("--render-surface needs --blender (it is the surface the Blender output carries)")
+    if args.rule == "uniform" and args.stiffness is None:
+        raise InputError("--rule uniform needs --stiffness (the raw spring constant [N/m])")
+    if args.damping_ratio < 0 or not math.isfinite(args.damping_ratio):
+        raise InputError(f"--damping-ratio = {args.damping_ratio:g} is not a finite number >= 0")
+    if args.newton_iterations < 0:
+        raise InputError(f"--newton-iterations = {args.newton_iterations} is not >= 0")
+    if args.newton_iterations and args.integrator != "implicit_euler":
+        raise InputError(f"--newton-iterations applies to --integrator implicit_euler, not {args.integrator}")
+    if args.runaway_factor is not None and not args.runaway_factor > 0:
+        raise InputError(f"--runaway-factor = {args.runaway_factor:g} is not > 0 ('inf' turns the check off)")

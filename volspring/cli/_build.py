@@ -1,0 +1,174 @@
+"""From ``volspring-sim``'s parsed arguments to a scene: the tet mesh, the model, gravity, drag and pins.
+
+The data path of the command: INPUT (a mesh file, a spring topology file with shells, or a built-in shape,
+in ``--units``) -> :func:`load_mesh` -> :func:`build_model` (material, stiffness rule, damping) -> :func:`build_scene`
+(gravity, drag, ``--pin`` regions read by :func:`volspring.regions.parse_region`). Bad values raise
+:class:`~volspring.cli._arguments.InputError` or ValueError, naming the option and the value.
+"""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from volspring.cli._arguments import DEFAULT_NU, InputError
+
+__all__ = ["anchored_surface", "build_model", "build_scene", "gravity_vector", "load_mesh", "pinned_nodes"]
+
+
+def load_mesh(args):
+    """The body [m] of INPUT and a description of where it came from.
+
+    Returns
+    -------
+    body : TetMesh or SpringTopology
+        A SpringTopology (the tet mesh with its shells) for a topology file (``*.npz``,
+        :func:`meshing.topology_io.is_topology_path`), else the tet mesh.
+    origin : str
+    """
+    from meshing.topology_io import is_topology_path
+
+    path = Path(args.input)
+    if path.is_file():
+        if args.size is not None:
+            raise InputError(f"--size applies to built-in shapes only; {path} is already a tet mesh")
+        if is_topology_path(path):
+            return _read_topology(path, args.units, args.scale), str(path)
+        return _read_mesh(path, args.units, args.scale), str(path)
+    from meshing.shapes import SHAPE_NAMES, Shape, looks_like_shape, parse_shape
+    from meshing.units import UNITS, length_factor
+
+    if not looks_like_shape(args.input):
+        raise InputError(f"INPUT {args.input!r} is neither a mesh file nor a built-in shape NAME:D1,D2,... "
+                         f"(shapes: {', '.join(SHAPE_NAMES)})")
+    from meshing.tetrahedralize import tetrahedralize
+
+    shape = parse_shape(args.input)
+    factor = length_factor(args.units, args.scale)
+    if factor != 1.0:
+        shape = Shape(shape.name, tuple(dimension * factor for dimension in shape.dimensions))
+    low, high = shape.bounds
+    size = (args.size * UNITS[args.units] if args.size is not None
+            else min(shape.extent / 10.0, float((high - low).min()) / 2.0))
+    try:
+        mesh = tetrahedralize(shape, size=size, method=args.mesher, seed=args.seed)
+    except ValueError:
+        raise
+    except Exception as error:  # gmsh raises bare Exceptions
+        raise InputError(f"meshing {shape.spec()} at --size {size:g} with {args.mesher} failed: {error}") from error
+    return mesh, f"{shape.spec()} meshed by {args.mesher} at size {size:g} m"
+
+
+def _read_mesh(path, units, scale):
+    from meshing import TetMesh
+
+    try:
+        return TetMesh.read(path, units=units, scale=scale)
+    except (ValueError, FileNotFoundError) as error:
+        raise InputError(str(error)) from error
+
+
+def _read_topology(path, units, scale):
+    from meshing.topology_io import read_topology
+
+    try:
+        return read_topology(path, units=units, scale=scale)
+    except (ValueError, FileNotFoundError) as error:
+        raise InputError(str(error)) from error
+
+
+def build_model(args, mesh):
+    """The spring model of ``mesh`` (a TetMesh, or a SpringTopology whose shells the model keeps) with the
+    material, rule and damping of the arguments."""
+    from volspring.material import Material
+    from volspring.elements.spring_rules import NU_IGNORING_RULES
+    from volspring.model import Model
+
+    material = Material(E=args.E, nu=DEFAULT_NU if args.nu is None else args.nu, density=args.density)
+    if args.nu is not None and args.rule in NU_IGNORING_RULES:
+        warnings.warn(f"--nu {args.nu:g} is ignored by --rule {args.rule}: pure springs have one effective Poisson "
+                      "ratio whatever nu is asked (the Cauchy limit; volspring-validate cauchy measures it)",
+                      UserWarning, stacklevel=2)
+    return Model.from_mesh(mesh, material, rule=args.rule, stiffness=args.stiffness, damping_ratio=args.damping_ratio)
+
+
+def build_scene(args, model):
+    """The scene of ``model``: gravity, drag and the pinned nodes of the arguments."""
+    from meshing.units import UNITS
+    from volspring import Drag, Gravity, Pins, Scene
+
+    forces = []
+    gravity = gravity_vector(args.gravity)
+    if gravity is not None:
+        forces.append(Gravity(g=tuple(gravity)))
+    if args.drag:
+        forces.append(Drag(rate=args.drag))
+    pins = pinned_nodes(args.pin, model.rest_positions, UNITS[args.units])
+    return Scene(model, forces=forces, pins=None if pins is None else Pins(pins))
+
+
+def gravity_vector(text):
+    """(3,) float [m/s^2] of ``--gravity gx,gy,gz``, or None for ``off`` (or a zero vector)."""
+    if text.strip().lower() in ("off", "none", "0"):
+        return None
+    try:
+        g = np.array([float(part) for part in text.split(",")])
+    except ValueError:
+        raise InputError(f"--gravity {text!r} is not 3 numbers gx,gy,gz") from None
+    if len(g) != 3 or not np.isfinite(g).all():
+        raise InputError(f"--gravity {text!r} is not 3 finite numbers gx,gy,gz")
+    return None if not g.any() else g
+
+
+def pinned_nodes(regions, points, unit=1.0):
+    """(p,) int -- the nodes in any of the ``--pin`` regions, or None without one.
+
+    Parameters
+    ----------
+    regions : list of str
+        ``--pin`` values, in the grammar of :func:`volspring.regions.parse_region`.
+    points : (n, 3) float
+        Rest positions [m].
+    unit : float
+        Metres per unit of the numbers in ``regions`` (``--units``).
+
+    Raises
+    ------
+    InputError
+        For a region that selects no node, with the mesh's extent.
+    ValueError
+        For a region that does not parse.
+    """
+    from volspring.regions import describe_bounds, parse_region
+
+    if not regions:
+        return None
+    selected = np.zeros(len(points), dtype=bool)
+    for text in regions:
+        inside = parse_region(text, unit=unit, label="--pin").nodes(points)
+        if not inside.any():
+            raise InputError(f"--pin {text} selects no node; the mesh spans {describe_bounds(points)} m")
+        selected |= inside
+    return np.flatnonzero(selected)
+
+
+def anchored_surface(path, model, units, scale):
+    """A render surface file bound to the model's tet mesh, vertices in the file's order."""
+    import trimesh
+
+    from meshing import anchor
+    from meshing.units import length_factor
+
+    if not path.is_file():
+        raise InputError(f"no render surface file at {path}")
+    try:
+        # process=False: no merging or reordering, so the PC2 matches the file Blender imports.
+        surface = trimesh.load(path, force="mesh", process=False)
+    except Exception as error:  # trimesh raises a variety of errors for unreadable files
+        raise InputError(f"cannot read {path} as a surface mesh: {error}") from error
+    if len(getattr(surface, "vertices", ())) == 0:
+        raise InputError(f"{path} holds no surface vertices")
+    surface.vertices = surface.vertices * length_factor(units, scale)  # drawn with INPUT, in its units
+    return anchor(model.topology.mesh, surface)

@@ -1,0 +1,188 @@
+"""The run of ``volspring-sim``: exit statuses, the output folder, the stepping loop, frames and checkpoints.
+
+:func:`main` parses, then :func:`run` claims the output folder (its manifest lists every file before
+it exists and ends with the run's status), builds the scene (:mod:`volspring.cli._build`), steps it
+with :func:`volspring.simulate`, writing frames and checkpoints from the frame callback, and prints
+the summary. Ctrl-C, SIGTERM and SIGHUP end the run with one line saying where it stopped and how to
+resume it (:class:`RunProgress`).
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+import sys
+import time
+import warnings
+
+from volspring.cli import _build
+from volspring.cli._arguments import (CHECKPOINT_NAME, EXIT_DIVERGED, EXIT_INPUT, EXIT_USAGE, PROG, SERIES_NAME,
+                                      SURFACE_NAME, InputError, UsageError, build_parser, check_arguments,
+                                      joined_vectors)
+from volspring.cli._terminal import Progress, fail, progress_enabled, show_warning, summary
+
+__all__ = ["Diverged", "RunProgress", "main", "run"]
+
+
+class Diverged(FloatingPointError):
+    """The simulation diverged; the message also says which frames the output folder holds."""
+
+
+def main(argv=None) -> int:
+    """Run ``volspring-sim`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
+
+    0 success, 1 bad input or a failed run, 2 a bad command line, 3 a diverged simulation, 130 Ctrl-C,
+    143 SIGTERM, 129 SIGHUP; every failure is one line on stderr.
+    """
+    from volspring.errors import SolverNotConverged
+
+    argv = sys.argv[1:] if argv is None else [str(token) for token in argv]
+    try:
+        args = build_parser().parse_args(joined_vectors(argv))
+    except UsageError as error:
+        return fail(error, EXIT_USAGE)
+    except SystemExit as done:  # --help
+        return done.code if isinstance(done.code, int) else 0
+    from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
+
+    where = RunProgress()
+    try:
+        with warnings.catch_warnings(), handle_termination():
+            warnings.showwarning = show_warning  # one line each, on stderr, from the first check on
+            return run(args, where, argv)
+    except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
+        return fail(error, EXIT_DIVERGED)
+    except (InputError, ValueError, OSError, SolverNotConverged, Warning) as error:
+        return fail(error, EXIT_INPUT)
+    except (KeyboardInterrupt, Interrupted) as stop:  # Ctrl-C, SIGTERM, SIGHUP: one line, no traceback
+        print(f"{PROG}: interrupted by {interruption_name(stop)}{where.describe(argv)}", file=sys.stderr)
+        return exit_status(stop)
+
+
+class RunProgress:
+    """Where a run has got to, for the line printed when it is interrupted."""
+
+    def __init__(self):
+        self.state = None
+        self.checkpoint = None  # (path, t) of the last checkpoint written
+
+    def describe(self, argv) -> str:
+        """`` at t = ... s (step k); the last checkpoint is ...; resume with: volspring-sim ...``."""
+        if self.state is None:
+            return " before the first step; nothing to resume"
+        text = f" at t = {self.state.t:.6g} s (step {self.state.step})"
+        if self.checkpoint is None:
+            return text + "; no checkpoint was written (--checkpoint-every N makes a run resumable)"
+        path, t = self.checkpoint
+        kept = [token for index, token in enumerate(argv)
+                if token != "--resume" and (index == 0 or argv[index - 1] != "--resume")
+                and not token.startswith("--resume=")]
+        resume = shlex.join([PROG, *kept, "--resume", str(path)])
+        return f"{text}; the last checkpoint is {path} at t = {t:.6g} s; resume with: {resume}"
+
+
+def run(args, where: RunProgress, argv) -> int:
+    """Check, open the output folder, then build, run and report; the folder's manifest ends with the
+    run's status (finished, failed, interrupted)."""
+    check_arguments(args)
+    if args.out is None:
+        return _run_in(args, where, None)
+    from volspring.output import RunFolder, check_output_folder
+
+    check_output_folder(args.out, label="--out")  # a file, below a file, not writable: before any work
+
+    # Claimed before any work: a refused folder costs nothing, and every file is listed before it exists.
+    folder = RunFolder.open(args.out, command=[PROG, *argv], overwrite=args.overwrite, resume=args.resume is not None,
+                            flags={"overwrite": "--overwrite", "resume": "--resume CHECKPOINT"})
+    with folder:
+        return _run_in(args, where, folder)
+
+
+def _run_in(args, where: RunProgress, folder) -> int:
+    from volspring.checkpoint import load_checkpoint, save_checkpoint
+    from volspring.integrators import make_integrator
+    from volspring.simulate import simulate
+
+    started = time.perf_counter()
+    body, origin = _build.load_mesh(args)  # a TetMesh, or a SpringTopology with shells
+    model = _build.build_model(args, body)
+    scene = _build.build_scene(args, model)
+    integrator = make_integrator(args.integrator, **({"newton_iterations": args.newton_iterations}
+                                                     if args.newton_iterations else {}))
+
+    state, first_frame = scene.initial_state(), 0
+    total_steps = max(int(math.ceil(args.duration / args.dt - 1e-9)), 0)
+    if args.resume is not None:
+        state = load_checkpoint(args.resume, scene=scene, integrator=integrator, dt=args.dt)
+        where.checkpoint = (args.resume, state.t)
+        if state.step >= total_steps:
+            raise InputError(f"the checkpoint {args.resume} is at step {state.step} (t = {state.t:.6g} s), "
+                             f"already at --duration {args.duration:g} s ({total_steps} steps)")
+        first_frame = _frames_before(args, state.t)
+    # Steps are counted from the run's start, so a resumed run ends on the same step as an
+    # uninterrupted one (no round-off from t).
+    remaining = total_steps - state.step
+
+    writers = _writers(args, model, first_frame, None if folder is None else folder.record)
+    checks = {} if args.runaway_factor is None else {"runaway_factor": args.runaway_factor}
+    progress = Progress(enabled=progress_enabled(args), start=state.t, end=state.t + remaining * args.dt)
+    last = {"frames": 0, "state": state}
+
+    def on_frame(frame_index, current):
+        if folder is not None:  # the frame's files listed in one manifest write, before any is written
+            folder.record(*(path for writer in writers for path in writer.frame_paths()))
+        for writer in writers:
+            writer(frame_index, current)
+        if args.checkpoint_every and frame_index and frame_index % args.checkpoint_every == 0:
+            folder.record(args.out / CHECKPOINT_NAME)
+            save_checkpoint(args.out / CHECKPOINT_NAME, current, scene=scene, integrator=integrator, dt=args.dt)
+            where.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
+        last["frames"] += 1
+        last["state"] = where.state = current
+        progress.update(current.t, first_frame + frame_index)
+
+    try:
+        result = simulate(scene, integrator, duration=remaining * args.dt, dt=args.dt, state=state,
+                          frame_dt=args.frame_dt, callback=on_frame, guard=args.guard, **checks)
+    except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
+        progress.close()
+        kept = ""
+        if args.out is not None:
+            kept = (f"; {args.out} holds {first_frame + last['frames']} complete frame(s)"
+                    + (f", the last at t = {last['state'].t:.6g} s" if last["frames"] else ""))
+        raise Diverged(f"{error}{kept}") from error
+    finally:
+        progress.close()
+    if args.checkpoint_every:
+        folder.record(args.out / CHECKPOINT_NAME)
+        save_checkpoint(args.out / CHECKPOINT_NAME, result.state, scene=scene, integrator=integrator, dt=args.dt)
+    if not args.quiet:
+        summary(args, origin, model, scene, integrator, result, first_frame, time.perf_counter() - started)
+    return 0
+
+
+def _frames_before(args, t) -> int:
+    """How many frames of an earlier run come before time t (the resumed run rewrites from t on)."""
+    from volspring.output import read_pvd
+
+    if args.out is None:
+        return 0
+    pvd = args.out / f"{SERIES_NAME}.pvd"
+    if not pvd.is_file():
+        return 0
+    return sum(1 for time, _ in read_pvd(pvd) if time < t - 1e-6 * args.dt)
+
+
+def _writers(args, model, first_frame, record):
+    from volspring.output import BlenderWriter, ParaViewWriter
+
+    if args.out is None:
+        return []
+    writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame, record=record)]
+    if args.blender:
+        surface = (model if args.render_surface is None
+                   else _build.anchored_surface(args.render_surface, model, args.units, args.scale))
+        pc2 = args.out / f"{SURFACE_NAME}.pc2"
+        writers.append(BlenderWriter(args.out, surface, name=SURFACE_NAME,
+                                     first_frame=first_frame if pc2.is_file() else 0, record=record))
+    return writers

@@ -1,0 +1,194 @@
+"""What an element set is: a family of elements, each acting on a few nodes (its stencil).
+
+A model is rest positions, masses and a list of element sets (:class:`volspring.Model`). Each
+set gives, for positions x [m] and velocities v [m/s] of all n nodes,
+
+- its forces on the nodes (:meth:`ElementSet.forces`, (n, 3) [N]);
+- its potential energy (:meth:`ElementSet.energy`, [J]), of which the elastic forces are minus the gradient;
+- its Jacobian as dense blocks per element on the element's stencil
+  (:meth:`ElementSet.stiffness_blocks`: K_e = -dF/dx restricted to the element, and optionally
+  :meth:`ElementSet.damping_blocks`: C_e = -dF/dv).
+
+That is all a new kind of physics writes. Assembly (:class:`volspring.assembly.BlockPattern`)
+takes the union of the stencils of all sets as the 3x3 block pattern of the implicit matrix, so
+every internal stiffness lands in the matrix that the AMG hierarchy sees; the integrators, the
+static and modal solves, the stability estimate and validation then use the set with no other
+change. Sign convention, everywhere: blocks are *stiffness* (K = -dF/dx, C = -dF/dv, positive
+semi-definite for a stable element), and an assembled implicit matrix is
+M + c_D C + c_K K.
+
+A set may store its blocks compactly: :attr:`ElementSet.block_map` says which of its b blocks
+per element goes, with which sign, into which (row, column) pair of its stencil (springs keep
+one 3x3 block per spring and scatter it four times with signs +, +, -, -). The default is the
+full k x k layout of a k-node stencil.
+
+Examples
+--------
+A per-tet volume penalty written in a few lines is in ``tests/test_element_sets.py``.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+__all__ = ["BlockMap", "ElementSet", "Linearization"]
+
+
+@dataclass(frozen=True)
+class BlockMap:
+    """Where an element's blocks go: entry q adds ``sign[q] * blocks[e, block[q]]`` to the matrix
+    block (``stencil[e, row[q]]``, ``stencil[e, column[q]]``) of every element e.
+
+    Parameters
+    ----------
+    row, column : (q,) int -- positions in the stencil
+    block : (q,) int -- which of the element's ``block_count`` blocks
+    sign : (q,) float -- +1 or -1
+    block_count : int -- blocks stored per element, b
+    """
+
+    row: np.ndarray
+    column: np.ndarray
+    block: np.ndarray
+    sign: np.ndarray
+    block_count: int
+
+    @classmethod
+    def full(cls, k: int) -> "BlockMap":
+        """The dense k x k layout: block a k + b of an element is its (a, b) block."""
+        row, column = np.divmod(np.arange(k * k), k)
+        return cls(row, column, np.arange(k * k), np.ones(k * k), k * k)
+
+
+class Linearization:
+    """Forces and scaled blocks c_K K_e + c_D C_e of one element set at one configuration.
+
+    Parameters
+    ----------
+    forces : (n, 3) float -- the set's forces on the nodes [N]
+    blocks : (e, b, 3, 3) float -- c_K K_e + c_D C_e in the set's block layout
+    stiffness : (e, b, 3, 3) float -- K_e alone (for products with dF/dx)
+    element_set : ElementSet -- whose stencil and block map the blocks follow
+    """
+
+    def __init__(self, forces, blocks, stiffness, element_set):
+        self.forces, self.blocks, self.stiffness, self.element_set = forces, blocks, stiffness, element_set
+
+    def dfdx_times(self, u) -> np.ndarray:
+        """(n, 3) float -- dF/dx @ u: the change of the set's forces per unit displacement u [N]."""
+        return -_block_product(self.element_set, self.stiffness, u)
+
+
+def _block_product(element_set, blocks, u) -> np.ndarray:
+    """(n, 3) float -- (the assembled blocks) @ u, scattered to the nodes."""
+    layout, stencil = element_set.block_map, element_set.stencil
+    gathered = u[stencil[:, layout.column]]  # (e, q, 3)
+    products = np.einsum("eqab,eqb->eqa", blocks[:, layout.block], gathered) * layout.sign[None, :, None]
+    out = np.zeros_like(u, dtype=np.float64)
+    rows = stencil[:, layout.row].ravel()
+    for c in range(3):
+        out[:, c] = np.bincount(rows, weights=products[..., c].ravel(), minlength=len(u))
+    return out
+
+
+class ElementSet(ABC):
+    """A family of elements of a model (see the module docstring): springs, volume terms, angle springs.
+
+    Subclasses give :attr:`stencil`, :meth:`forces`, :meth:`energy` and :meth:`stiffness_blocks`
+    (and :meth:`damping_blocks` when they damp); the rest has working defaults. Element sets are
+    immutable: a changed set is a new object.
+
+    Class attributes
+    ----------------
+    name : str -- a short label ("springs", "volume") for messages, files and output
+    """
+
+    name: str = ""
+
+    @property
+    @abstractmethod
+    def stencil(self) -> np.ndarray:
+        """(e, k) int -- the nodes of each element."""
+
+    @property
+    def element_count(self) -> int:
+        return len(self.stencil)
+
+    @cached_property
+    def block_map(self) -> BlockMap:
+        """Where the stored blocks go (:class:`BlockMap`); the full k x k layout by default."""
+        return BlockMap.full(self.stencil.shape[1])
+
+    @abstractmethod
+    def forces(self, x, v=None) -> np.ndarray:
+        """(n, 3) float -- the set's forces on every node at positions x and velocities v [N]
+        (without v: the elastic part only)."""
+
+    @abstractmethod
+    def energy(self, x) -> float:
+        """Potential energy of the set at positions x [J]."""
+
+    @abstractmethod
+    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+        """(e, b, 3, 3) float -- K_e = -dF/dx of each element in the block layout [N/m].
+
+        ``clamp_compression`` asks for a positive semi-definite approximation where the exact
+        Hessian is indefinite (springs clamp their transverse term); sets without such a
+        term ignore it.
+        """
+
+    def damping_blocks(self, x) -> np.ndarray | None:
+        """(e, b, 3, 3) float -- C_e = -dF/dv of each element [N s/m], or None when the set does not damp."""
+        return None
+
+    def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0, clamp_compression=True):
+        """Forces and the blocks c_K K_e + c_D C_e in one call (sets with a faster joint pass override it).
+
+        Parameters
+        ----------
+        x : (n, 3) float -- positions [m]
+        v : (n, 3) float, optional -- velocities [m/s]
+        stiffness_scale : float -- c_K (h^2 [s^2] in an implicit step, 1 in statics)
+        damping_scale : float -- c_D (h [s] in an implicit step)
+        clamp_compression : bool -- see :meth:`stiffness_blocks`
+
+        Returns
+        -------
+        Linearization
+        """
+        stiffness = self.stiffness_blocks(x, clamp_compression=clamp_compression)
+        blocks = stiffness_scale * stiffness
+        if damping_scale:
+            damping = self.damping_blocks(x)
+            if damping is not None:
+                blocks = blocks + damping_scale * damping
+        return Linearization(self.forces(x, v), blocks, stiffness, self)
+
+    def renumbered(self, node_rank):
+        """The set in another node numbering, elements reordered for locality, and the element order;
+        None (the default) when the set is evaluated in the model's numbering.
+
+        Assembly numbers the free nodes for cache locality (:class:`volspring.assembly.BlockPattern`);
+        a set on a hot path (springs) returns ``(renumbered_set, order)`` so that its kernels walk
+        memory in order too.
+        """
+        return None
+
+    def stiffness_times(self, x, u, *, clamp_compression=True) -> np.ndarray:
+        """(n, 3) float -- K(x) @ u, K = -dF/dx of the set [N]."""
+        return _block_product(self, self.stiffness_blocks(x, clamp_compression=clamp_compression), u)
+
+    def check(self, node_count: int) -> None:
+        """Refuse a stencil that is not (e, k) integer node indices below ``node_count``."""
+        stencil = np.asarray(self.stencil)
+        if stencil.ndim != 2 or stencil.dtype.kind not in "iu":
+            raise ValueError(f"{type(self).__name__}.stencil has shape {stencil.shape} and dtype {stencil.dtype}; "
+                             "expected (e, k) integer node indices")
+        if stencil.size and (stencil.min() < 0 or stencil.max() >= node_count):
+            e = int(np.flatnonzero(((stencil < 0) | (stencil >= node_count)).any(axis=1))[0])
+            raise ValueError(f"{type(self).__name__}.stencil[{e}] = {stencil[e].tolist()} indexes a node outside "
+                             f"[0, {node_count - 1}] (the model has {node_count} nodes)")

@@ -1,0 +1,279 @@
+"""Edge springs with dampers: forces, energy and Jacobian blocks, vectorised over all springs.
+
+For spring e = (i, j) with r = (x_j - x_i) / l, l = |x_j - x_i|:
+
+- spring force on i: f = k_e (l - l0) r; on j: -f (momentum is conserved exactly);
+- damper force on i: f_d = -k_d ((v_i - v_j) . r) r; on j: -f_d;
+- stiffness block H = k_e [r r^T + (1 - l0/l) (I - r r^T)], so dF_i/dx_i = -H, dF_i/dx_j = +H;
+  the transverse term is negative under compression (l < l0), so it is clamped at 0 by
+  default to keep the assembled matrix positive semi-definite (Baraff & Witkin 1998);
+- damper block D = k_d r r^T, dF_i/dv_i = -D, dF_i/dv_j = +D.
+
+Each spring stores one block W = c_K H + c_D D and scatters it four times (+W on the diagonal
+blocks of i and j, -W on (i, j) and (j, i)): :attr:`Springs.block_map`. Forces and blocks come
+out of one pass (:meth:`Springs.linearize`), the fast path of every implicit step.
+
+Where the stiffness constants come from (material rules, shells) is :mod:`volspring.model`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+
+from volspring.elements.base import BlockMap, ElementSet, Linearization
+from volspring.errors import SpringCollapsed
+from volspring.material import _real_array, _shown
+from meshing.topology import SPRING_KINDS, vector_lengths
+
+__all__ = ["SpringLinearization", "Springs"]
+
+
+@dataclass(frozen=True, eq=False)
+class Springs(ElementSet):
+    """Springs and dampers along node pairs (see the module docstring).
+
+    Parameters
+    ----------
+    node_count : int -- nodes of the model the springs belong to
+    pairs : (s, 2) int -- node pairs (i, j), two different nodes each
+    stiffness : (s,) float -- effective linear stiffness k_e [N/m], >= 0
+    damping : (s,) float -- damper coefficient k_d [N s/m], >= 0
+    rest_lengths : (s,) float -- l0 [m], > 0
+    kinds : (s,) int -- index into ``SPRING_KINDS`` (what each spring models: tet edge, shell...)
+
+    Numbers broadcast (``damping=0.0``). Input is checked: a TypeError for what is not numbers or
+    for non-integer pairs, a ValueError for wrong shapes, values out of range and pairs outside
+    the nodes or joining a node to itself, naming the first offender.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volspring.elements import Springs
+    >>> pair = Springs(2, [[0, 1]], stiffness=100.0, damping=0.0, rest_lengths=1.0, kinds=0)
+    >>> pair.forces(np.array([[0.0, 0, 0], [1.5, 0, 0]]))[0].tolist()   # stretched 0.5 m: 50 N towards j
+    [50.0, 0.0, 0.0]
+    """
+
+    node_count: int
+    pairs: np.ndarray
+    stiffness: np.ndarray
+    damping: np.ndarray
+    rest_lengths: np.ndarray
+    kinds: np.ndarray
+
+    name = "springs"
+
+    def __post_init__(self):
+        pairs = checked_pairs(self.pairs, int(self.node_count))
+        s = len(pairs)
+        values = {
+            "stiffness": per_item_array("stiffness", self.stiffness, s, allow_zero=True),
+            "damping": per_item_array("damping", self.damping, s, allow_zero=True),
+            "rest_lengths": per_item_array("rest_lengths", self.rest_lengths, s, allow_zero=False),
+        }
+        kinds = np.broadcast_to(np.asarray(self.kinds, dtype=np.int8), (s,)).copy()
+        if s and (kinds.min() < 0 or kinds.max() >= len(SPRING_KINDS)):
+            raise ValueError(f"kinds hold {kinds.min()} to {kinds.max()}; expected indices into SPRING_KINDS, "
+                             f"0 to {len(SPRING_KINDS) - 1}")
+        object.__setattr__(self, "node_count", int(self.node_count))
+        for name, array in (("pairs", pairs), ("kinds", kinds), *values.items()):
+            array.setflags(write=False)
+            object.__setattr__(self, name, array)
+
+    # ------------------------------------------------------------------ the element-set interface
+    @property
+    def stencil(self) -> np.ndarray:
+        return self.pairs
+
+    @cached_property
+    def block_map(self) -> BlockMap:
+        # (i, i) +W, (j, j) +W, (i, j) -W, (j, i) -W
+        return BlockMap(np.array([0, 1, 0, 1]), np.array([0, 1, 1, 0]), np.zeros(4, dtype=np.int64),
+                        np.array([1.0, 1.0, -1.0, -1.0]), 1)
+
+    def forces(self, x, v=None) -> np.ndarray:
+        """(n, 3) float -- spring (and damper, with ``v``) forces on the nodes [N]."""
+        r, length = self._directions(x)
+        return self.incidence @ (self._magnitudes(r, length, v)[:, None] * r)
+
+    def energy(self, x) -> float:
+        """Elastic energy sum 1/2 k_e (l - l0)^2 [J]."""
+        _, length = self._directions(x)
+        return float(0.5 * np.dot(self.stiffness, (length - self.rest_lengths) ** 2))
+
+    def strains(self, x) -> np.ndarray:
+        """(s,) float -- engineering strain (l - l0) / l0 of each spring [-]."""
+        _, length = self._directions(x)
+        return length / self.rest_lengths - 1.0
+
+    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+        """(s, 3, 3) float -- H of each spring [N/m] (see the module docstring)."""
+        return self.linearize(x, clamp_compression=clamp_compression).blocks
+
+    def damping_blocks(self, x) -> np.ndarray:
+        """(s, 3, 3) float -- D = k_d r r^T of each spring [N s/m]."""
+        r, _ = self._directions(x)
+        return self.damping[:, None, None] * r[:, :, None] * r[:, None, :]
+
+    def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0,
+                  clamp_compression=True) -> "SpringLinearization":
+        """Forces and the blocks c_K H_e + c_D D_e in one pass over the springs.
+
+        Parameters
+        ----------
+        x : (n, 3) float -- positions [m]
+        v : (n, 3) float, optional -- velocities [m/s]; without them the dampers exert no force
+        stiffness_scale : float -- c_K (h^2 [s^2] for an implicit step, 1 for statics)
+        damping_scale : float -- c_D (h [s] for an implicit step)
+        clamp_compression : bool -- clamp the transverse term (1 - l0/l) at 0
+        """
+        r, length = self._directions(x)
+        forces = self.incidence @ (self._magnitudes(r, length, v)[:, None] * r)
+        transverse = 1.0 - self.rest_lengths / length
+        if clamp_compression:
+            np.maximum(transverse, 0.0, out=transverse)
+        transverse *= self.stiffness
+        along = stiffness_scale * (self.stiffness - transverse)
+        if damping_scale:
+            along += damping_scale * self.damping
+        blocks = r[:, :, None] * (along[:, None] * r)[:, None, :]
+        blocks.reshape(-1, 9)[:, ::4] += (stiffness_scale * transverse)[:, None]
+        return SpringLinearization(forces, blocks, None, self, r, length, self.stiffness, transverse)
+
+    def renumbered(self, node_rank, node_count=None) -> tuple:
+        """The same springs in another node numbering, sorted by their first node there.
+
+        Parameters
+        ----------
+        node_rank : (n,) int -- new index of every node
+        node_count : int, optional -- nodes in the new numbering (default n)
+
+        Returns
+        -------
+        springs : Springs -- in the new numbering
+        order : (s,) int -- which spring of ``self`` each new spring is
+        """
+        local = node_rank[self.pairs]
+        order = np.argsort(local.min(axis=1), kind="stable")
+        renumbered = Springs(len(node_rank) if node_count is None else node_count, local[order],
+                             self.stiffness[order], self.damping[order], self.rest_lengths[order], self.kinds[order])
+        return renumbered, order
+
+    # ------------------------------------------------------------------ derived data
+    @property
+    def spring_count(self) -> int:
+        return len(self.pairs)
+
+    @cached_property
+    def incidence(self) -> sp.csr_matrix:
+        """(n, s) sparse -- +1 at (i, e) and -1 at (j, e) for spring e = (i, j).
+
+        ``incidence @ f`` scatters per-spring forces on i, shape (s, 3), to node forces (n, 3).
+        """
+        s = self.spring_count
+        rows = self.pairs.T.ravel()
+        values = np.concatenate([np.ones(s), -np.ones(s)])
+        return sp.csr_matrix((values, (rows, np.tile(np.arange(s), 2))), shape=(self.node_count, s))
+
+    @cached_property
+    def difference(self) -> sp.csr_matrix:
+        """(s, n) sparse -- -1 at (e, i) and +1 at (e, j): ``difference @ x`` is x_j - x_i per spring.
+
+        A sparse product gathers the spring vectors several times faster than fancy indexing.
+        """
+        return (-self.incidence.T).tocsr()
+
+    def _directions(self, x):
+        d = self.difference @ x
+        length = vector_lengths(d)
+        if length.size and not length.min() > 0.0:
+            e = int(np.argmin(length))
+            raise SpringCollapsed(e, *self.pairs[e])
+        return d / length[:, None], length
+
+    def _magnitudes(self, r, length, v):
+        """(s,) float -- spring plus damper force along r on each spring's node i [N]."""
+        magnitude = self.stiffness * (length - self.rest_lengths)
+        if v is not None and self.damping.any():
+            # (v_i - v_j) . r = -(v_j - v_i) . r
+            magnitude += self.damping * np.einsum("ij,ij->i", self.difference @ v, r)
+        return magnitude
+
+    def __repr__(self) -> str:
+        return f"Springs({self.spring_count} springs on {self.node_count} nodes)"
+
+
+class SpringLinearization(Linearization):
+    """The springs' forces and blocks at one configuration (from :meth:`Springs.linearize`).
+
+    Attributes
+    ----------
+    forces : (n, 3) float -- spring (and damper, if velocities were given) forces on the nodes [N]
+    blocks : (s, 3, 3) float -- W_e = c_K H_e + c_D D_e
+    directions : (s, 3) float -- unit vectors r_e from i to j
+    lengths : (s,) float -- current lengths [m]
+    axial : (s,) float -- k_e, coefficient of r r^T in H_e [N/m]
+    transverse : (s,) float -- k_e (1 - l0/l), clamped if asked: coefficient of the transverse
+        projector I - r r^T in H_e [N/m]
+    """
+
+    def __init__(self, forces, blocks, stiffness, element_set, directions, lengths, axial, transverse):
+        super().__init__(forces, blocks, stiffness, element_set)
+        self.directions, self.lengths, self.axial, self.transverse = directions, lengths, axial, transverse
+
+    def dfdx_times(self, u) -> np.ndarray:
+        """(n, 3) float -- dF/dx @ u [N]: H_e (u_j - u_i) = (k - k_t) r (r . du) + k_t du, added
+        to node i and subtracted from node j."""
+        springs = self.element_set
+        du = springs.difference @ u
+        along = (self.axial - self.transverse) * np.einsum("ij,ij->i", self.directions, du)
+        return springs.incidence @ (along[:, None] * self.directions + self.transverse[:, None] * du)
+
+
+# ---------------------------------------------------------------------------- input checks
+def per_item_array(name, value, count, *, allow_zero) -> np.ndarray:
+    """(count,) float -- a number or array of numbers broadcast to one per spring (or node), checked."""
+    array = _real_array(name, value)
+    try:
+        array = np.broadcast_to(array, (count,)).copy()
+    except ValueError:
+        raise ValueError(f"{name} has shape {array.shape}; expected a number or shape ({count},)") from None
+    bad = ~np.isfinite(array) | (array < 0) | ((array == 0) & (not allow_zero))
+    if bad.any():
+        first = np.flatnonzero(bad)[0]
+        expected = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"{name}[{first}] = {array[first]} is not finite and {expected}")
+    return array
+
+
+def checked_pairs(springs, node_count) -> np.ndarray:
+    """(s, 2) int64 -- node pairs: integers in [0, node_count), each joining two different nodes."""
+    try:
+        array = np.asarray(springs)
+    except ValueError as error:  # ragged nested sequences
+        raise ValueError(f"springs = {_shown(springs)} is not a regular (s, 2) array: {error}") from None
+    if array.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    if array.dtype.kind not in "iu":
+        raise TypeError(f"springs have dtype {array.dtype}; expected integer node indices (first pair "
+                        f"{array.reshape(-1)[:2].tolist()}; integer-valued floats convert with "
+                        "np.asarray(springs, dtype=int))")
+    if array.ndim != 2 or array.shape[1] != 2:
+        raise ValueError(f"springs have shape {array.shape}; expected (s, 2), one node pair per spring "
+                         "(e.g. [[0, 1]] for one spring)")
+    array = array.astype(np.int64)
+    outside = ((array < 0) | (array >= node_count)).any(axis=1)
+    if outside.any():
+        e = int(np.flatnonzero(outside)[0])
+        raise ValueError(f"springs[{e}] = {array[e].tolist()} indexes a node outside [0, {node_count - 1}] "
+                         f"(the model has {node_count} nodes; {int(outside.sum())} spring(s) affected)")
+    loops = array[:, 0] == array[:, 1]
+    if loops.any():
+        e = int(np.flatnonzero(loops)[0])
+        raise ValueError(f"springs[{e}] = {array[e].tolist()} joins node {array[e, 0]} to itself; "
+                         "expected two different nodes")
+    return array

@@ -1,0 +1,192 @@
+"""Model files: a whole :class:`~volspring.Model` saved to one ``.npz`` file and loaded back bit for bit.
+
+The file is a compressed ``.npz`` (numpy, read without pickle), by convention named
+``NAME.vsmodel.npz`` (:data:`MODEL_SUFFIX`). Format ``"volspring.model"``, version 1, arrays:
+
+``format``, ``version``
+    ``"volspring.model"`` and 1, 0-d;
+``rest_positions`` (n, 3) float64 [m], ``masses`` (n,) float64 [kg], ``node_body`` (n,) int64
+    as in the model;
+``materials`` (b, 3) float64 and ``material_given`` (b,) bool
+    E [Pa], nu [-], density [kg/m^3] of every body, and whether the body has a material at all
+    (a model from arrays has none: its row is NaN);
+``body_names`` (b,) text, ``rule`` () text
+    as in the model;
+``element_types`` (e,) text
+    the type of every element set, in the model's order, as named in :data:`ELEMENT_SET_TYPES`
+    (``"springs"``); set ``i``'s arrays are ``elements/i/NAME``. For springs: ``pairs`` (s, 2) int64,
+    ``stiffness`` (s,) float64 [N/m], ``damping`` (s,) float64 [N s/m], ``rest_lengths`` (s,)
+    float64 [m], ``kinds`` (s,) int8 with ``kind_names`` (k,) text (the labels of ``SPRING_KINDS``);
+``has_topology`` () bool, and ``topology/NAME``
+    the spring topology the model was built from, if any, in the layout of a topology file
+    (:mod:`meshing.topology_io`: points, mesh_node_count, tets, springs, kinds, shell data).
+
+Only element sets of the types in :data:`ELEMENT_SET_TYPES` can be stored: :func:`save_model`
+refuses a model with any other (a user's volume term, say) with a TypeError naming its type, rather
+than write a file that would load as another model. The write is atomic; :func:`load_model` checks
+the format name and version (a newer version is refused naming the file, the version found and
+those supported), refuses a missing or malformed array naming the file and the array, and builds the
+model through its own checks, so a loaded model gives the same forces bit for bit.
+
+Examples
+--------
+>>> import tempfile
+>>> from pathlib import Path
+>>> from meshing import structured_box
+>>> from volspring import Material, Model, load_model, save_model
+>>> model = Model.from_mesh(structured_box((2, 2, 2), (1.0, 1.0, 1.0)), Material(E=1e5, nu=0.3, density=1000.0))
+>>> path = save_model(Path(tempfile.mkdtemp()) / "cube.vsmodel.npz", model)
+>>> load_model(path)
+Model(27 nodes, 98 springs, rule='van_gelder', mass 1000 kg)
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from meshing._archive import labelled_codes, read_archive, take_array, write_archive
+from meshing.topology import SPRING_KINDS
+from meshing.topology_io import topology_arrays, topology_from_arrays
+from volspring.elements import Springs
+from volspring.material import Material
+from volspring.model import Model
+
+__all__ = ["ELEMENT_SET_TYPES", "MODEL_FORMAT", "MODEL_SUFFIX", "MODEL_VERSION", "load_model", "save_model"]
+
+MODEL_FORMAT = "volspring.model"
+#: The format version written; :data:`READABLE_VERSIONS` are those read.
+MODEL_VERSION = 1
+READABLE_VERSIONS = (1,)
+#: The conventional file name ending of a model file.
+MODEL_SUFFIX = ".vsmodel.npz"
+
+
+def _springs_arrays(springs: Springs) -> dict:
+    return {"pairs": springs.pairs, "stiffness": springs.stiffness, "damping": springs.damping,
+            "rest_lengths": springs.rest_lengths, "kinds": springs.kinds, "kind_names": np.asarray(SPRING_KINDS)}
+
+
+def _springs_from_arrays(arrays, path, prefix, node_count) -> Springs:
+    def take(name, shape, kind):
+        return take_array(arrays, prefix + name, path, shape=shape, kind=kind)
+
+    kinds = labelled_codes(arrays, path, codes=prefix + "kinds", labels=prefix + "kind_names", known=SPRING_KINDS)
+    return Springs(node_count, take("pairs", ("s", 2), "i"), take("stiffness", ("s",), "f"),
+                   take("damping", ("s",), "f"), take("rest_lengths", ("s",), "f"), kinds)
+
+
+#: The element-set types a model file can hold: name in the file -> (type, its arrays, the set from arrays).
+ELEMENT_SET_TYPES = {"springs": (Springs, _springs_arrays, _springs_from_arrays)}
+
+
+def save_model(path, model: Model) -> Path:
+    """Save a model (rest shape, masses, bodies, materials, element sets, topology) to a file, atomically.
+
+    Parameters
+    ----------
+    path : path-like
+        The file, by convention ``NAME.vsmodel.npz``; parent folders are created.
+    model : Model
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    TypeError
+        For something that is not a Model, or an element set of a type a model file cannot hold
+        (not in :data:`ELEMENT_SET_TYPES`), naming the set and its type; nothing is written then.
+    """
+    if not isinstance(model, Model):
+        raise TypeError(f"model must be a volspring.Model, got {type(model).__name__}")
+    given = np.array([material is not None for material in model.materials])
+    materials = np.array([[m.E, m.nu, m.density] if m is not None else [np.nan] * 3 for m in model.materials])
+    arrays = {
+        "rest_positions": model.rest_positions,
+        "masses": model.masses,
+        "node_body": model.node_body,
+        "materials": materials.reshape(-1, 3),
+        "material_given": given,
+        "body_names": np.array(model.body_names, dtype=str),
+        "rule": np.asarray(model.rule),
+        "has_topology": np.asarray(model.topology is not None),
+    }
+    types = []
+    for index, element_set in enumerate(model.elements):
+        name = next((name for name, (kind, _, _) in ELEMENT_SET_TYPES.items() if type(element_set) is kind), None)
+        if name is None:
+            known = ", ".join(kind.__name__ for kind, _, _ in ELEMENT_SET_TYPES.values())
+            raise TypeError(f"cannot save model.elements[{index}], a {type(element_set).__name__}: a model file "
+                            f"holds element sets of the types {known} only, and would silently lose this one")
+        types.append(name)
+        to_arrays = ELEMENT_SET_TYPES[name][1]
+        arrays.update({f"elements/{index}/{key}": value for key, value in to_arrays(element_set).items()})
+    arrays["element_types"] = np.array(types, dtype=str)
+    if model.topology is not None:
+        arrays.update(topology_arrays(model.topology, prefix="topology/"))
+    return write_archive(path, arrays, format_name=MODEL_FORMAT, version=MODEL_VERSION)
+
+
+def load_model(path) -> Model:
+    """Load a model saved by :func:`save_model`.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    Model
+        With the saved arrays bit for bit, the same element sets in the same order, and the topology.
+
+    Raises
+    ------
+    FileNotFoundError
+        When there is no file at ``path``.
+    ValueError
+        Naming the file: not a model file (truncated, damaged, another format), a format version this
+        volspring does not read (naming it and the versions supported), a missing or malformed array
+        (naming it), an element-set type this volspring does not know, or a model its own checks refuse.
+    """
+    arrays, _ = read_archive(path, format_name=MODEL_FORMAT, versions=READABLE_VERSIONS, what="model")
+
+    def take(name, shape, kind):
+        return take_array(arrays, name, path, shape=shape, kind=kind)
+
+    rest_positions = take("rest_positions", ("n", 3), "f")
+    node_count = len(rest_positions)
+    masses = take("masses", ("n",), "f")
+    node_body = take("node_body", ("n",), "i")
+    rows = take("materials", ("b", 3), "f")
+    given = take("material_given", ("b",), "b")
+    names = take("body_names", ("b",), "U")
+    if not len(rows) == len(given) == len(names):
+        raise ValueError(f"{path} is damaged: 'materials', 'material_given' and 'body_names' have "
+                         f"{len(rows)}, {len(given)} and {len(names)} rows; expected one per body each")
+    rule = str(take("rule", (), "U"))
+    types = [str(name) for name in take("element_types", ("e",), "U")]
+    try:
+        materials = tuple(Material(E=E, nu=nu, density=density) if present else None
+                          for (E, nu, density), present in zip(rows.tolist(), given.tolist()))
+        elements = []
+        for index, name in enumerate(types):
+            if name not in ELEMENT_SET_TYPES:
+                raise ValueError(f"{path} holds an element set of type {name!r} (elements[{index}]), which this "
+                                 f"volspring cannot read (known: {', '.join(ELEMENT_SET_TYPES)})")
+            from_arrays = ELEMENT_SET_TYPES[name][2]
+            elements.append(from_arrays(arrays, path, f"elements/{index}/", node_count))
+        topology = None
+        if bool(take("has_topology", (), "b")):
+            topology = topology_from_arrays(arrays, path, prefix="topology/")
+        return Model(rest_positions, masses, tuple(elements), topology=topology, rule=rule, node_body=node_body,
+                     materials=materials, body_names=tuple(str(name) for name in names))
+    except ValueError as error:
+        if str(path) in str(error):
+            raise
+        raise ValueError(f"{path} holds an invalid model: {error}") from error
+    except TypeError as error:  # the model's checks of types: a damaged file, to the reader
+        raise ValueError(f"{path} holds an invalid model: {error}") from error

@@ -1,0 +1,321 @@
+"""The AMG-preconditioned CG solver: pyamg smoothed aggregation on the 3x3 block matrix, one V-cycle per
+CG iteration (see :class:`AMGConjugateGradient` for the choices and their measurements)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from volspring.solvers.krylov import SolveInfo, _LinearSolver, _operator, conjugate_gradient
+
+__all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "PROLONGATION_OMEGA", "PYAMG_CYCLE_VERSIONS"]
+
+logger = logging.getLogger(__name__)
+
+#: Weight of the Jacobi prolongation smoother under row-wise Gershgorin weights (see
+#: :class:`AMGConjugateGradient`: why not pyamg's random-start spectral radius, and the measurements).
+PROLONGATION_OMEGA = 2.0
+#: Weight of the block Jacobi smoother, divided by a Gershgorin bound of D^-1 A on each level.
+BLOCK_JACOBI_OMEGA = 2.0 / 3.0
+#: pyamg releases (major, minor), first and last, whose private recursive cycle
+#: ``MultilevelSolver.__solve(level, x, b, cycle)`` :func:`_v_cycle` was checked against: the same
+#: signature and the same V-cycle arithmetic in 5.0.0, 5.1.0, 5.2.1, 5.3.0 and 5.4.1.
+PYAMG_CYCLE_VERSIONS = ((5, 0), (5, 4))
+
+
+def _v_cycle(hierarchy):
+    """The function r -> z applying one V-cycle of ``hierarchy`` from a zero guess, z ~ A^-1 r.
+
+    pyamg's public preconditioner, ``hierarchy.aspreconditioner(cycle="V")``, runs
+    ``hierarchy.solve(r, maxiter=1)``, which around the one cycle also takes ||r||, ||r - A 0|| and
+    ||r - A z||: two products with the fine matrix per application, on top of the cycle's own three
+    to four, and CG applies it once per iteration. For the pyamg versions in
+    :data:`PYAMG_CYCLE_VERSIONS` this calls the cycle underneath directly (the private
+    ``MultilevelSolver.__solve``); for any other version, or if that method is gone, it returns
+    the public operator. Both run the same arithmetic on the same zero guess, so they give the same
+    z bit for bit; the public one is slower: on a 9,741-node gmsh beam at h omega_max = 50, 1.31 times
+    the CPU time per application and 1.15 to 1.22 times per CG solve (rtol 1e-3 and 1e-6, same
+    iterations; ``python benchmarks/bench_solvers.py``).
+    """
+    import pyamg
+
+    public = hierarchy.aspreconditioner(cycle="V")
+    try:
+        version = tuple(int(part) for part in pyamg.__version__.split(".")[:2])  # "5.4.1" -> (5, 4)
+    except ValueError:  # not a release number: only the public path is safe
+        version = None
+    first, last = PYAMG_CYCLE_VERSIONS
+    cycle = getattr(hierarchy, "_MultilevelSolver__solve", None)
+    if version is None or not first <= version <= last or cycle is None or len(hierarchy.levels) == 1:
+        return public.matvec
+
+    def apply(r):
+        z = np.zeros_like(r)
+        cycle(0, z, r, "V")
+        return z
+
+    return apply
+
+
+@dataclass(frozen=True)
+class _Source:
+    """What a hierarchy is built from: enough to rebuild it bit for bit (after unpickling)."""
+
+    matrix: sp.spmatrix           # frozen copy of the fine matrix
+    near_null_space: np.ndarray   # (N, k) or, with a prolongation, (n, k)
+    prolongation: sp.spmatrix | None = None  # (N, n): coarse space of a two-level cycle
+
+
+class AMGConjugateGradient(_LinearSolver):
+    """CG preconditioned with one smoothed-aggregation V-cycle on the BSR matrix.
+
+    Parameters
+    ----------
+    rtol : float
+        Relative residual target.
+    maxiter : int
+        CG iteration cap.
+    on_failure : {"raise", "warn"}
+    smoother : {"gauss_seidel", "jacobi"}
+        Block Gauss-Seidel (forward before, backward after the coarse correction, so the V-cycle
+        stays symmetric) or block Jacobi. Measured on a 10k-node beam: block Jacobi needs twice
+        the iterations; Chebyshev (degree 3, in A) saved one iteration in five at 10k but nothing
+        at 50k, and unlike Gauss-Seidel it is not invariant to the diagonal scaling that large
+        mass ratios bring, so it is not offered.
+    max_coarse : int
+        Unknowns on the coarsest level (solved with sparse LU).
+    strength_theta : float
+        Couplings weaker than theta (symmetric strength measure) are dropped when aggregating;
+        0.05 cut CG iterations from 6 to 5 (rtol 1e-3) and 11 to 9 (rtol 1e-6) on a 50k-node gmsh
+        beam at h omega_max = 50, for 10 % more work per cycle; a hierarchy with operator
+        complexity above 2.5 is rebuilt with theta = 0.
+    timer : callable
+        ``timer() -> seconds`` behind ``setup_seconds`` and ``solve_seconds`` (default
+        :func:`time.perf_counter`).
+
+    The coarsest level (about a thousand unknowns at 50k nodes) is factorised with sparse LU:
+    the default pseudo-inverse spent 1.3 s of a 3.9 s setup in a dense SVD, for the same cycle.
+    The candidates B are used as given (``improve_candidates=None``): rigid-body modes are
+    already the near-null space, and relaxing them first doubled the setup time for the same
+    iteration counts (measured on 10k and 50k-node beams).
+
+    The hierarchy is built from an explicit :meth:`build` call (or the first solve) and kept;
+    it is a frozen copy, so later refills of the matrix do not disturb it. The V-cycle is
+    applied through :func:`_v_cycle` (pyamg's cycle without the two residual norms its public
+    preconditioner adds).
+
+    Two-level cycle: :meth:`build` with a ``prolongation`` P (N, n) builds the hierarchy on the
+    Galerkin coarse matrix P^T A P (``near_null_space`` then has n rows) and preconditions with
+    one forward Gauss-Seidel sweep on A, the V-cycle on the restricted residual, and one backward
+    sweep (symmetric, so CG still applies). This is the p-multigrid of the P2 finite-element
+    references (:mod:`validation.fem_solvers`), where smoothed aggregation on the P2 matrix itself
+    stalled.
+
+    Pickling: a pyamg hierarchy does not pickle (its smoothers and coarse solver are closures), so
+    a pickled solver keeps the frozen matrix and near-null space it was built from and leaves
+    :attr:`hierarchy` at None; the next :meth:`solve` or :meth:`precondition` rebuilds it (counted
+    in ``setup_seconds`` and ``build_count``). The build is deterministic, so the rebuilt
+    hierarchy, and every answer, is the same bit for bit.
+
+    Reproducibility: the build draws no random numbers, so the same matrix gives the same
+    hierarchy bit for bit and the caller's global random state is never touched. pyamg's default
+    prolongation smoother scales by a spectral radius estimated by Lanczos from a start vector
+    drawn from numpy's *global* generator, which made runs above about 800 nodes differ (3e-8 m at
+    802 nodes) and a resumed run differ from an uninterrupted one. Here the prolongator is smoothed
+    with row-wise Gershgorin weights instead (``weighting="local"``, no estimate at all), with
+    omega = :data:`PROLONGATION_OMEGA` = 2: Gershgorin bounds exceed the spectral radius 1.5 to 1.8
+    times on these matrices (REFERENCE.md section 3), so 2 under the bound is about pyamg's 4/3
+    under the true radius. Measured on 10k and 50k-node gmsh beams (nu 0.25 and 0.45, dt 1e-3, 1e-2,
+    1e-1 s): the same CG iteration counts as the random default in 10 of 12 systems at rtol 1e-3
+    (one more in 2), within one at rtol 1e-6; with omega = 4/3 it took up to 2 more at rtol 1e-3
+    and 4 more at 1e-6 (``python benchmarks/bench_amg_weighting.py``).
+    The block Jacobi smoother is weighted by a Gershgorin bound of D^-1 A per level for the same
+    reason (pyamg would estimate its spectral radius from a random vector too).
+
+    Examples
+    --------
+    A 1D Laplacian with the constant as near-null space:
+
+    >>> import numpy as np
+    >>> import scipy.sparse as sp
+    >>> matrix = sp.diags([-1.0, 2.0, -1.0], [-1, 0, 1], shape=(2000, 2000)).tocsr()
+    >>> solver = AMGConjugateGradient(rtol=1e-8, max_coarse=50)
+    >>> x, info = solver.solve(matrix, np.ones(2000), near_null_space=np.ones((2000, 1)))
+    >>> info.converged, info.rebuilt, len(solver.hierarchy.levels) > 1
+    (True, True, True)
+    """
+
+    method = "amg"
+
+    def __init__(self, *, rtol=1e-3, maxiter=500, on_failure="raise", smoother="gauss_seidel",
+                 max_coarse=300, strength_theta=0.05, timer=time.perf_counter):
+        super().__init__(rtol=rtol, maxiter=maxiter, on_failure=on_failure, timer=timer)
+        if smoother not in ("gauss_seidel", "jacobi"):
+            raise ValueError(f"smoother = {smoother!r}, expected 'gauss_seidel' or 'jacobi'")
+        self.smoother, self.max_coarse = smoother, int(max_coarse)
+        self.strength_theta = float(strength_theta)
+        self.build_count = 0
+        self._source = None      # _Source: what the hierarchy is built from (pickled)
+        self._hierarchy = None   # pyamg MultilevelSolver (not pickled)
+        self._cycle = None       # r -> z, one V-cycle of it (not pickled)
+
+    @property
+    def hierarchy(self):
+        """The pyamg ``MultilevelSolver``; None before the first build, and after unpickling until
+        the next :meth:`solve` or :meth:`precondition` rebuilds it."""
+        return self._hierarchy
+
+    def __getstate__(self):
+        state = self.__dict__.copy()
+        state["_hierarchy"] = state["_cycle"] = None  # closures inside: rebuilt from _source on use
+        return state
+
+    def build(self, matrix, near_null_space, *, prolongation=None) -> float:
+        """Build the hierarchy for ``matrix``; returns the seconds it took (by ``timer``).
+
+        Parameters
+        ----------
+        matrix : (N, N) sparse
+            SPD, best as BSR with block size 3.
+        near_null_space : (N, k) float
+            Rigid-body modes of the unknowns (``rigid_body_modes``, k = 6); with a
+            ``prolongation``, of the n coarse unknowns, (n, k).
+        prolongation : (N, n) sparse, optional
+            Coarse space of a two-level cycle (see the class docstring).
+        """
+        start = self.timer()
+        near_null_space = np.ascontiguousarray(near_null_space, dtype=np.float64)
+        coarse_size = matrix.shape[0] if prolongation is None else prolongation.shape[1]
+        if prolongation is not None and prolongation.shape[0] != matrix.shape[0]:
+            raise ValueError(f"prolongation has shape {prolongation.shape}, expected ({matrix.shape[0]}, n) "
+                             f"for a {matrix.shape} matrix")
+        if near_null_space.ndim != 2 or near_null_space.shape[0] != coarse_size:
+            raise ValueError(f"near_null_space has shape {near_null_space.shape}, expected ({coarse_size}, k)")
+        frozen = matrix.copy() if matrix.format in ("csr", "bsr") else matrix.tocsr()
+        # Canonical (sorted, summed) up front: pyamg sorts the indices in place, and a hierarchy rebuilt
+        # from the sorted matrix (after unpickling) would otherwise differ from one built before.
+        frozen.sum_duplicates()
+        self._source = _Source(frozen, near_null_space,
+                               None if prolongation is None else sp.csr_matrix(prolongation))
+        self._construct()
+        seconds = self.timer() - start
+        logger.debug("built AMG hierarchy: %s levels, operator complexity %.2f, %.3f s",
+                     len(self._hierarchy.levels), self._hierarchy.operator_complexity(), seconds)
+        return seconds
+
+    def _construct(self):
+        """Build the pyamg hierarchy and its cycle from ``self._source`` (deterministic)."""
+        import pyamg
+
+        source = self._source
+        matrix = source.matrix
+        if source.prolongation is not None:
+            matrix = (source.prolongation.T @ matrix @ source.prolongation).tocsr()
+        # Gauss-Seidel first in every case: it draws nothing at set-up (see the class docstring);
+        # block Jacobi gets its deterministic weights once the levels exist.
+        gauss_seidel = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
+        options = dict(B=source.near_null_space, symmetry="hermitian",
+                       presmoother=gauss_seidel[0], postsmoother=gauss_seidel[1],
+                       smooth=("jacobi", {"omega": PROLONGATION_OMEGA, "weighting": "local"}),
+                       max_coarse=self.max_coarse, improve_candidates=None, coarse_solver="splu")
+        hierarchy = pyamg.smoothed_aggregation_solver(
+            matrix, strength=("symmetric", {"theta": self.strength_theta}), **options)
+        if self.strength_theta and hierarchy.operator_complexity() > 2.5:
+            # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
+            hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength="symmetric", **options)
+        if self.smoother != "gauss_seidel":
+            from pyamg.relaxation.smoothing import change_smoothers
+
+            weighted = [("block_jacobi", {"omega": BLOCK_JACOBI_OMEGA / _block_jacobi_bound(level.A),
+                                          "iterations": 1, "withrho": False})
+                        for level in hierarchy.levels[:-1]]
+            change_smoothers(hierarchy, weighted, weighted)
+        cycle = _v_cycle(hierarchy)
+        try:
+            cycle(np.zeros(matrix.shape[0]))  # the coarse solver sets up lazily: count it here
+        except RuntimeError:  # a singular coarsest matrix (statics of a barely held body): pseudo-inverse
+            from pyamg.multilevel import coarse_grid_solver
+
+            hierarchy.coarse_solver = coarse_grid_solver("pinv")
+            cycle(np.zeros(matrix.shape[0]))
+        self._hierarchy, self._cycle = hierarchy, cycle
+        self.build_count += 1
+
+    def precondition(self, r) -> np.ndarray:
+        """One cycle from a zero guess: z ~ A^-1 r (an SPD operator for CG).
+
+        Parameters
+        ----------
+        r : (N,) float
+            Residual.
+
+        Returns
+        -------
+        (N,) float
+        """
+        if self._cycle is None:
+            if self._source is None:
+                raise ValueError("the AMG hierarchy is not built: call build(matrix, near_null_space) first")
+            self._construct()  # after unpickling: the same hierarchy again
+        source = self._source
+        if source.prolongation is None:
+            return self._cycle(r)
+        from pyamg.relaxation.relaxation import gauss_seidel
+
+        matrix, prolongation = source.matrix, source.prolongation
+        z = np.zeros_like(r)
+        gauss_seidel(matrix, z, r, iterations=1, sweep="forward")
+        z += prolongation @ self._cycle(prolongation.T @ (r - matrix @ z))
+        gauss_seidel(matrix, z, r, iterations=1, sweep="backward")
+        return z
+
+    def solve(self, matrix, rhs, *, x0=None, extra=None, near_null_space=None, prolongation=None):
+        """Solve ``(matrix + extra) x = rhs``; returns ``(x, SolveInfo)``.
+
+        Parameters
+        ----------
+        matrix : (N, N) sparse
+            SPD; the hierarchy is built from it when there is none of its size yet.
+        rhs : (N,) float
+        x0 : (N,) float, optional
+            Warm start.
+        extra : (N, N) sparse, optional
+            Added in every product, left out of the hierarchy.
+        near_null_space, prolongation
+            As for :meth:`build`; needed only when this solve builds the hierarchy.
+        """
+        setup = 0.0
+        rebuilt = self._source is None or self._source.matrix.shape != matrix.shape
+        if rebuilt:
+            if near_null_space is None:
+                raise ValueError("the first AMG solve needs near_null_space (rigid-body modes)")
+            setup = self.build(matrix, near_null_space, prolongation=prolongation)
+        elif self._cycle is None:  # unpickled: rebuild from the kept matrix, the same bits
+            start = self.timer()
+            self._construct()
+            setup, rebuilt = self.timer() - start, True
+        start = self.timer()
+        x, iterations, residual, initial = conjugate_gradient(
+            _operator(matrix, extra), rhs, x0=x0, preconditioner=self.precondition, rtol=self.rtol,
+            maxiter=self.maxiter)
+        info = SolveInfo("amg", iterations, residual, bool(residual <= self.rtol), self.rtol, initial,
+                         setup, self.timer() - start, rebuilt)
+        return self._finish(x, info)
+
+
+def _block_jacobi_bound(matrix) -> float:
+    """max_i sum_j |(D^-1 A)_ij| with D the block diagonal of a BSR ``matrix``: a deterministic
+    upper bound of the spectral radius of D^-1 A (Gershgorin), never below it."""
+    from pyamg.util.utils import get_block_diag
+
+    matrix = sp.bsr_matrix(matrix)
+    size = matrix.blocksize[0]
+    inverse = get_block_diag(matrix, blocksize=size, inv_flag=True)
+    blocks = np.arange(len(inverse))
+    diagonal = sp.bsr_matrix((inverse, blocks, np.arange(len(inverse) + 1)), shape=matrix.shape)
+    scaled = (diagonal @ matrix).tocsr()
+    return float(abs(scaled).sum(axis=1).max())
