@@ -1,9 +1,11 @@
-"""Closed triangle surfaces: load, repair what can be repaired, refuse what cannot, and inside tests.
+"""Closed triangle surfaces: load, repair what can be repaired, refuse what cannot.
 
 :func:`load_surface` returns a ``trimesh.Trimesh`` that is usable as the boundary of a solid:
 finite coordinates, no degenerate or duplicate faces, every edge shared by exactly two faces,
 every vertex a single fan of faces, consistent winding with outward normals, and no
-self-intersection between faces that share no vertex.
+self-intersection between faces that share no vertex (the test is
+:mod:`meshing.surface_intersection`). The inside tests, :func:`winding_numbers` and
+:func:`contains_points`, are :mod:`meshing.surface_winding`, re-exported here.
 """
 
 from __future__ import annotations
@@ -14,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from meshing.geometry import signed_volumes
-from meshing.tolerances import CONTACT_NUDGE, LARGEST_COORDINATE, ZERO_VOLUME
+from meshing.surface_intersection import _crossing_face_pairs
+from meshing.surface_winding import contains_points, winding_numbers
+from meshing.tolerances import LARGEST_COORDINATE
 from meshing.units import length_factor, scaled_points, warn_if_large
 
 __all__ = ["SURFACE_EXTENSIONS", "SurfaceError", "contains_points", "load_surface", "winding_numbers"]
@@ -228,198 +231,10 @@ def _orient(mesh, name):
 
 
 def _check_self_intersection(mesh, name):
-    """Refuse faces that cut through each other (faces sharing a vertex are not tested).
-
-    Two tests, on the pairs of faces whose bounding boxes overlap:
-
-    - An edge of one face passing strictly through the other (:func:`_edges_cross`): any crossing in
-      general position, within one body or between bodies.
-    - Between two bodies (connected parts), exact contacts decided by nudging: boxes offset by half their
-      size cross only on the diagonals that split their square sides, and overlapping boxes can share
-      side planes, where no crossing is strict. Each body pair is tested again with one body moved by
-      :data:`~meshing.tolerances.CONTACT_NUDGE` of the pair's size, along each of :data:`_NUDGE_DIRECTIONS`
-      and their opposites. An overlap of some volume survives every such move; bodies that only touch (a side
-      lying against a side) come apart under at least one, and pass.
-    """
-    tri = mesh.triangles
-    low, high = tri.min(axis=1), tri.max(axis=1)
-    cell = float(np.median((high - low).max(axis=1))) or 1.0
-    origin = low.min(axis=0)
-    first_cell = np.floor((low - origin) / cell).astype(np.int64)
-    span = np.floor((high - origin) / cell).astype(np.int64) - first_cell + 1
-    # Broad phase: each face goes into every grid cell its bounding box covers.
-    count = span.prod(axis=1)
-    face = np.repeat(np.arange(len(tri)), count)
-    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    sx, sy = np.repeat(span[:, 0], count), np.repeat(span[:, 1], count)
-    ijk = np.repeat(first_cell, count, axis=0) + np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], 1)
-    dims = ijk.max(axis=0) + 1
-    key = np.ravel_multi_index(ijk.T, dims)
-    order = np.lexsort((face, key))
-    key, face = key[order], face[order]
-    # Candidate pairs: faces in the same cell (within runs of equal keys).
-    starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    sizes = np.diff(np.r_[starts, len(key)])
-    a_list, b_list = [], []
-    for offset in range(1, int(sizes.max()) if len(sizes) else 1):
-        same = np.flatnonzero(np.r_[key[offset:] == key[:-offset], np.zeros(offset, bool)])
-        a_list.append(face[same])
-        b_list.append(face[same + offset])
-    if not a_list:
-        return
-    a, b = np.concatenate(a_list), np.concatenate(b_list)
-    pair_key = np.unique(np.minimum(a, b) * len(tri) + np.maximum(a, b))  # 1D keys: np.unique(axis=0) is slow
-    pairs = np.stack([pair_key // len(tri), pair_key % len(tri)], axis=1)
-    fa, fb = mesh.faces[pairs[:, 0]], mesh.faces[pairs[:, 1]]
-    disjoint = ~(fa[:, :, None] == fb[:, None, :]).any(axis=(1, 2))
-    overlap = (low[pairs[:, 0]] <= high[pairs[:, 1]]).all(1) & (low[pairs[:, 1]] <= high[pairs[:, 0]]).all(1)
-    pairs = pairs[disjoint & overlap]
-    if len(pairs) == 0:
-        return
-    first_tri, second_tri = tri[pairs[:, 0]], tri[pairs[:, 1]]
-    hit = _faces_cross(first_tri, second_tri)
-    body = _body_labels(mesh)
-    between = np.flatnonzero(body[pairs[:, 0]] != body[pairs[:, 1]])
-    if not hit.any() and len(between):
-        first_body, second_body = body[pairs[between, 0]], body[pairs[between, 1]]
-        body_pair = np.minimum(first_body, second_body) * (body.max() + 1) + np.maximum(first_body, second_body)
-        # Move the body with the larger label by `step` relative to the other; `size` is the pair's extent.
-        sign = np.sign(first_body - second_body).astype(np.float64)
-        size = np.ptp(np.concatenate([first_tri[between], second_tri[between]], axis=1), axis=1).max(axis=1)
-        overlapping, first_move = np.unique(body_pair), None
-        for direction in np.concatenate([_NUDGE_DIRECTIONS, -_NUDGE_DIRECTIONS]):  # six moves, not a loop over faces
-            step = (CONTACT_NUDGE * sign * size)[:, None, None] * direction
-            crossing = _faces_cross(first_tri[between] + step, second_tri[between])
-            overlapping = np.intersect1d(overlapping, body_pair[crossing])
-            first_move = crossing if first_move is None else first_move
-        hit[between] = first_move & np.isin(body_pair, overlapping)
-    if hit.any():
-        first = pairs[np.flatnonzero(hit)[0]]
-        raise SurfaceError(f"{name}: {hit.sum()} pair(s) of faces cut through each other; first are faces "
-                           f"{first[0]} and {first[1]} near {tri[first[0]].mean(axis=0).tolist()}")
-
-
-#: The directions of the moves that decide exact contacts (their size is meshing.tolerances.CONTACT_NUDGE):
-#: three fixed generic ones (the rows of a rotation parallel to no axis or
-#: diagonal of a hand-made surface), each also taken the other way round.
-_NUDGE_DIRECTIONS = np.linalg.qr(np.array([[0.9134, 0.2331, -0.3337], [-0.1822, 0.9614, 0.2061],
-                                           [0.3627, -0.1438, 0.9207]]))[0]
-
-
-def _body_labels(mesh) -> np.ndarray:
-    """(f,) int -- the connected part (faces joined across edges) each face belongs to."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    adjacency = mesh.face_adjacency
-    graph = coo_matrix((np.ones(len(adjacency)), (adjacency[:, 0], adjacency[:, 1])),
-                       shape=(len(mesh.faces), len(mesh.faces)))
-    return connected_components(graph, directed=False)[1]
-
-
-def _faces_cross(first, second):
-    """(p,) bool -- whether an edge of either triangle of each pair passes strictly through the other."""
-    return _edges_cross(first, second) | _edges_cross(second, first)
-
-
-def _edges_cross(edge_triangles, triangles):
-    """(p,) bool -- whether an edge of ``edge_triangles[i]`` passes strictly through ``triangles[i]``.
-
-    Strictly: its ends lie on opposite sides of the triangle's plane and the line through it passes
-    each edge of the triangle on the same turning side, all with signed volumes beyond the flat-tet
-    rule (:data:`meshing.tolerances.ZERO_VOLUME`): four points are coplanar when the tet they span is flat. An edge that touches the plane with an end, lies in it, or meets the
-    triangle exactly on its boundary does not count here (see :func:`_check_self_intersection`).
-    """
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
-    corners = np.concatenate([edge_triangles, triangles], axis=1)
-    tolerance = ZERO_VOLUME * np.ptp(corners, axis=1).max(axis=1) ** 3
-    hit = np.zeros(len(triangles), dtype=bool)
-    for start, end in ((0, 1), (1, 2), (2, 0)):  # the three edges, not a loop over faces
-        p, q = edge_triangles[:, start], edge_triangles[:, end]
-        side_p, side_q = signed_volumes(a, b, c, p), signed_volumes(a, b, c, q)
-        through_plane = ((side_p > tolerance) & (side_q < -tolerance)) | ((side_p < -tolerance) & (side_q > tolerance))
-        turns = np.stack([signed_volumes(p, q, a, b), signed_volumes(p, q, b, c), signed_volumes(p, q, c, a)])
-        inside = (turns > tolerance).all(axis=0) | (turns < -tolerance).all(axis=0)
-        hit |= through_plane & inside
-    return hit
-
-
-# ---------------------------------------------------------------------- inside tests
-# A fixed generic rotation: rays cast along its third axis are parallel to no face or edge of a
-# hand-made surface (boxes, grids), so ties on edges have probability zero.
-_RAY_FRAME = np.linalg.qr(np.array([[0.8273, 0.1947, -0.3361], [0.2214, 0.9318, 0.1123], [0.3527, -0.0716, 0.9671]]))[0]
-
-
-def winding_numbers(vertices, faces, points, *, chunk: int = 2_000_000) -> np.ndarray:
-    """Winding number of a closed, outward-wound triangle surface around each point.
-
-    Counts signed crossings of a ray from each point (one fixed generic direction), with the
-    faces binned on a grid across the ray so that each point meets only the faces in its column.
-
-    Parameters
-    ----------
-    vertices : (n, 3) float -- surface vertices [m]
-    faces : (f, 3) int -- triangles, wound with outward normals
-    points : (k, 3) float -- query points [m]
-    chunk : int -- largest number of (point, face) candidate pairs handled at once (memory bound)
-
-    Returns
-    -------
-    (k,) int -- 1 inside a simple closed surface, 0 outside (more inside nested or overlapping bodies)
-    """
-    vertices = np.asarray(vertices, dtype=np.float64) @ _RAY_FRAME
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3) @ _RAY_FRAME
-    tri = vertices[np.asarray(faces)]
-    low, high = tri[:, :, :2].min(axis=1), tri[:, :, :2].max(axis=1)
-    cell = float(np.median((high - low).max(axis=1))) or 1.0
-    origin = low.min(axis=0)
-    first_cell = np.floor((low - origin) / cell).astype(np.int64)
-    span = np.floor((high - origin) / cell).astype(np.int64) - first_cell + 1
-    columns = (first_cell + span).max(axis=0)
-    count = span.prod(axis=1)
-    face = np.repeat(np.arange(len(tri)), count)
-    local = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    sx = np.repeat(span[:, 0], count)
-    column_x = np.repeat(first_cell[:, 0], count) + local % sx
-    key = column_x * columns[1] + np.repeat(first_cell[:, 1], count) + local // sx
-    order = np.argsort(key, kind="stable")
-    key, face = key[order], face[order]
-
-    point_cell = np.floor((points[:, :2] - origin) / cell).astype(np.int64)
-    in_grid = ((point_cell >= 0) & (point_cell < columns)).all(axis=1)
-    point_key = np.where(in_grid, point_cell[:, 0] * columns[1] + point_cell[:, 1], -1)
-    begin = np.searchsorted(key, point_key, side="left")
-    end = np.where(in_grid, np.searchsorted(key, point_key, side="right"), begin)
-    winding = np.zeros(len(points), dtype=np.int64)
-    # Batches of points with at most about `chunk` candidate (point, face) pairs each.
-    pair_count = end - begin
-    cumulative = np.cumsum(pair_count)
-    total = int(cumulative[-1]) if len(points) else 0
-    cuts = np.searchsorted(cumulative, np.arange(1, total // chunk + 1) * chunk)
-    batch = np.unique(np.r_[0, cuts, len(points)])
-    for lo, hi in zip(batch[:-1], batch[1:]):  # a few batches, not a loop over points
-        n = pair_count[lo:hi]
-        if n.sum() == 0:
-            continue
-        which = np.repeat(np.arange(lo, hi), n)
-        slot = np.repeat(begin[lo:hi], n) + np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
-        t = tri[face[slot]]
-        p = points[which]
-        # 2D barycentric coordinates of the point in the face's projection across the ray.
-        a, b, c = t[:, 0], t[:, 1], t[:, 2]
-        area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1])
-        w1 = (c[:, 0] - b[:, 0]) * (p[:, 1] - b[:, 1]) - (p[:, 0] - b[:, 0]) * (c[:, 1] - b[:, 1])
-        w2 = (a[:, 0] - c[:, 0]) * (p[:, 1] - c[:, 1]) - (p[:, 0] - c[:, 0]) * (a[:, 1] - c[:, 1])
-        w3 = area - w1 - w2
-        sign = np.sign(area)
-        inside = (sign != 0) & (w1 * sign >= 0) & (w2 * sign >= 0) & (w3 * sign >= 0)
-        z = (w1 * a[:, 2] + w2 * b[:, 2] + w3 * c[:, 2]) / np.where(area != 0, area, 1.0)
-        crossing = inside & (z > p[:, 2])
-        # An upward ray leaves the body through faces whose normals point up (positive projected area).
-        winding[lo:hi] += np.bincount(which[crossing] - lo, weights=sign[crossing], minlength=hi - lo).astype(np.int64)
-    return winding
-
-
-def contains_points(surface, points) -> np.ndarray:
-    """(k,) bool -- whether each point lies inside a closed, outward-wound ``trimesh.Trimesh``."""
-    return winding_numbers(surface.vertices, surface.faces, points) > 0
+    """Refuse faces that cut through each other (faces sharing a vertex are not tested; the test is
+    :func:`meshing.surface_intersection._crossing_face_pairs`)."""
+    crossing = _crossing_face_pairs(mesh)
+    if len(crossing):
+        first = crossing[0]
+        raise SurfaceError(f"{name}: {len(crossing)} pair(s) of faces cut through each other; first are faces "
+                           f"{first[0]} and {first[1]} near {mesh.triangles[first[0]].mean(axis=0).tolist()}")

@@ -230,6 +230,15 @@ def test_a_scene_is_conservative_iff_every_force_has_a_potential(model, forces, 
     assert Scene(model, forces=forces).conservative is conservative
 
 
+def test_external_forces_split_into_conservative_and_nonconservative_parts(model, motion):
+    x, v, t = motion
+    scene = Scene(model, forces=[Gravity(), Drag(rate=0.5), Wind(direction=(1, 0, 0), speed=2.0, rate=0.3)])
+    drag_and_wind = Scene(model, forces=[Drag(rate=0.5), Wind(direction=(1, 0, 0), speed=2.0, rate=0.3)])
+    assert np.array_equal(scene.external_forces(x, v, t, conservative=False), drag_and_wind.external_forces(x, v, t))
+    assert np.array_equal(scene.external_forces(x, v, t, conservative=True),
+                          Scene(model, forces=[Gravity()]).external_forces(x, v, t))
+
+
 # ---------------------------------------------------------------------------- (e) external Jacobian
 def test_the_external_jacobian_is_the_sum_of_the_forces_jacobians(model, motion):
     x, v, t = motion

@@ -268,11 +268,16 @@ class Scene:
         """Whether every external force has a potential (the model's element sets all have one)."""
         return all(isinstance(force, HasPotential) for force in self.forces)
 
-    def external_forces(self, x, v, t, out=None) -> np.ndarray:
-        """(n, 3) float -- the external forces on every node [N], added into ``out`` when given."""
+    def external_forces(self, x, v, t, out=None, *, conservative=None) -> np.ndarray:
+        """(n, 3) float -- the external forces on every node [N], added into ``out`` when given.
+
+        ``conservative=False`` sums only the forces without a potential (whose work energy
+        bookkeeping must track), ``True`` only those with one; ``None`` all.
+        """
         out = np.zeros((self.model.node_count, 3)) if out is None else out
         for force in self.forces:
-            force.accumulate(self.model, x, v, t, out)
+            if conservative is None or isinstance(force, HasPotential) == conservative:
+                force.accumulate(self.model, x, v, t, out)
         return out
 
     def forces_at(self, x, v, t) -> np.ndarray:

@@ -60,7 +60,6 @@ from volspring.errors import SimulationDiverged, TetsInvertedWarning
 from volspring.integrators import Integrator, make_integrator
 from volspring.material import _real_number
 from volspring.scene import Scene, State
-from volspring.forces import HasPotential
 from volspring.stability import GUARD_ACTIONS, StabilityGuard
 
 __all__ = ["simulate", "SimulationResult", "RUNAWAY_FACTOR", "RUNAWAY_CHECKS", "ENERGY_CHECK_INTERVAL"]
@@ -115,7 +114,7 @@ class _EnergyMonitor:
 
     def __init__(self, scene: Scene, state: State, *, energy_limit, runaway_factor, runaway_checks):
         self.scene = scene
-        self.nonconservative = [f for f in scene.forces if not isinstance(f, HasPotential)]
+        self.nonconservative = not scene.conservative
         self.kinetic, self.potential = self.energies(state)
         self.latest = state
         self.start = self.kinetic + self.potential
@@ -144,9 +143,7 @@ class _EnergyMonitor:
     def _nonconservative_forces(self, state):
         if not self.nonconservative:
             return None
-        total = np.zeros_like(state.x)
-        for force in self.nonconservative:
-            force.accumulate(self.scene.model, state.x, state.v, state.t, total)
+        total = self.scene.external_forces(state.x, state.v, state.t, conservative=False)
         total[~self.scene.free] = 0.0
         return total
 

@@ -30,15 +30,8 @@ that dies at any point leaves no file its manifest does not list. The manifest i
 atomically, once per :meth:`~RunFolder.record` call that brings a new name: a writer records all
 the files of a frame in one call, and a name already listed costs nothing.
 
-Manifest layout (JSON)::
-
-    {"format": "volspring-run", "version": 1,
-     "command": ["volspring-sim", "bunny.mesh", "--out", "run"],   # argv of the run
-     "started": "2025-01-31T09:12:44+00:00", "ended": null,          # UTC, ISO 8601
-     "status": "running",            # running | finished | interrupted | failed
-     "pid": 4711, "host": "lab-3", "volspring": "0.4.0",
-     "earlier": [],                  # the sessions a resumed run continues: command, started, ended, status
-     "files": ["frame.pvd", "frame_0000.vtu", ...]}                # relative to the folder, POSIX separators
+The manifest's layout and reading it are :mod:`volspring.output.run_manifest`; checking an output
+location and removing the files a manifest lists are :mod:`volspring.output.run_files`.
 
 Examples
 --------
@@ -59,26 +52,23 @@ volspring.output.run_folder.RunFolderRefused: ... an earlier run of the same com
 
 from __future__ import annotations
 
-import contextlib
-import datetime
 import json
 import logging
 import os
 import shlex
 import socket
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 
 from meshing._io import atomic_path, remove_stale_temporaries
 from volspring._signals import Interrupted
+from volspring.output.run_files import _inside, _remove_listed, check_output_folder
+from volspring.output.run_manifest import (MANIFEST_FORMAT, MANIFEST_NAME, MANIFEST_VERSION, STATUSES, _describe,
+                                           _now, _status, read_manifest)
 
 __all__ = ["MANIFEST_NAME", "RunFolder", "RunFolderRefused", "check_output_folder", "read_manifest"]
 
 logger = logging.getLogger(__name__)
 
-MANIFEST_NAME = "volspring-run.json"
-MANIFEST_FORMAT = "volspring-run"
-MANIFEST_VERSION = 1
-STATUSES = ("running", "finished", "interrupted", "failed")
 #: Files a desktop drops into folders it shows; they do not make a folder "not empty".
 DESKTOP_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
 #: How a caller's user asks for each option, for refusal messages (a CLI passes its own flags).
@@ -104,155 +94,12 @@ class RunFolderRefused(ValueError):
         self.folder, self.reason, self.previous = Path(folder), reason, previous
 
 
-def check_output_folder(path, *, label: str = "output folder") -> Path:
-    """Check that ``path`` is, or can be created as, a writable folder; nothing is created.
-
-    Meant to run before any work, so that a bad output location is reported in seconds rather
-    than after the computation.
-
-    Parameters
-    ----------
-    path : path-like
-        The folder.
-    label : str
-        How messages name it (a CLI passes its option, ``"--out"``).
-
-    Returns
-    -------
-    Path
-        ``path``.
-
-    Raises
-    ------
-    NotADirectoryError
-        If ``path``, or the closest of its parents that exists, is not a folder.
-    PermissionError
-        If the folder, or the closest existing parent it would be created in, is not writable.
-
-    Examples
-    --------
-    >>> import tempfile
-    >>> from pathlib import Path
-    >>> file = Path(tempfile.mkdtemp()) / "report.html"
-    >>> _ = file.write_text("")
-    >>> check_output_folder(file, label="--out")
-    Traceback (most recent call last):
-    ...
-    NotADirectoryError: --out .../report.html is an existing file, expected a folder (or a path where one can be created)
-    """
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise NotADirectoryError(f"{label} {path} is an existing file, expected a folder (or a path where one can "
-                                 "be created)")
-    existing = Path(os.path.abspath(path))
-    while not existing.exists() and existing != existing.parent:
-        existing = existing.parent
-    if not existing.is_dir():
-        raise NotADirectoryError(f"{label} {path} cannot be created: {existing} is a file, not a folder")
-    if not os.access(existing, os.W_OK | os.X_OK):
-        if existing == Path(os.path.abspath(path)):
-            raise PermissionError(f"{label} {path} is not writable (no permission to create files in it)")
-        raise PermissionError(f"{label} {path} cannot be created: no permission to create folders in {existing}")
-    return path
-
-
-def read_manifest(path) -> dict:
-    """Read and check a run manifest.
-
-    Parameters
-    ----------
-    path : path-like
-        A ``volspring-run.json`` file, or the folder holding one.
-
-    Returns
-    -------
-    dict
-        The manifest (layout in the module docstring).
-
-    Raises
-    ------
-    FileNotFoundError
-        If there is no manifest.
-    ValueError
-        If it is not valid JSON, not a volspring run manifest, or of a version this volspring does
-        not read (a newer one).
-    """
-    path = Path(path)
-    if path.is_dir():
-        path = path / MANIFEST_NAME
-    try:
-        manifest = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise ValueError(f"{path} is not valid JSON ({error})") from None
-    except UnicodeDecodeError as error:
-        raise ValueError(f"{path} is not UTF-8 text ({error})") from None
-    if not isinstance(manifest, dict) or manifest.get("format") != MANIFEST_FORMAT:
-        found = manifest.get("format") if isinstance(manifest, dict) else type(manifest).__name__
-        raise ValueError(f"{path} is not a volspring run manifest (format {found!r}, expected {MANIFEST_FORMAT!r})")
-    version = manifest.get("version")
-    if not isinstance(version, int) or not 1 <= version <= MANIFEST_VERSION:
-        raise ValueError(f"{path} has manifest version {version!r}; this volspring reads versions 1 to "
-                         f"{MANIFEST_VERSION} (a newer volspring wrote it?)")
-    files, command = manifest.get("files"), manifest.get("command")
-    if not isinstance(files, list) or not all(isinstance(file, str) for file in files):
-        raise ValueError(f"{path}: 'files' must be a list of relative paths, got {type(files).__name__}")
-    if not isinstance(command, list) or not all(isinstance(word, str) for word in command):
-        raise ValueError(f"{path}: 'command' must be a list of arguments, got {type(command).__name__}")
-    if manifest.get("status") not in STATUSES:
-        raise ValueError(f"{path}: status {manifest.get('status')!r} is not one of {', '.join(STATUSES)}")
-    return manifest
-
-
-def _now() -> str:
-    return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-
-
-def _process_alive(manifest: dict) -> bool:
-    """Whether the process a "running" manifest names still runs (on this machine; elsewhere assume so)."""
-    pid = manifest.get("pid")
-    if not isinstance(pid, int) or pid <= 0:
-        return False
-    if manifest.get("host") != socket.gethostname():
-        return True  # cannot tell: a run on another machine sharing the folder
-    if pid == os.getpid():
-        return False  # this process opens the folder again: the earlier RunFolder is not in use any more
-    if os.name != "posix":
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except (PermissionError, OverflowError):
-        return True
-    return True
-
-
-def _status(manifest: dict) -> str:
-    """The status of a manifest's run, "interrupted" for a "running" one whose process is gone."""
-    if manifest["status"] == "running" and not _process_alive(manifest):
-        return "interrupted"
-    return manifest["status"]
-
-
-def _inside(folder: Path, relative: str):
-    """``folder / relative`` if that stays inside ``folder`` (symbolic links resolved), else None."""
-    pure = PurePosixPath(relative)
-    if not relative or pure.is_absolute() or ".." in pure.parts or "\\" in relative:
-        return None
-    target = folder.joinpath(*pure.parts)
-    try:
-        target.parent.resolve().relative_to(folder.resolve())
-    except ValueError:
-        return None
-    return target
-
-
 class RunFolder:
     """The output folder of one run, with the manifest of the files it wrote.
 
     Make one with :meth:`open`; writers call :meth:`record` before they write a file; the run
     ends with :meth:`finish` (or by leaving a ``with`` block). See the module docstring for the
-    rules and the manifest layout.
+    rules, and :mod:`volspring.output.run_manifest` for the manifest layout.
 
     Attributes
     ----------
@@ -498,32 +345,5 @@ class RunFolder:
         return f"RunFolder({str(self.path)!r}, {self.status}, {len(self._listed)} file(s))"
 
 
-def _describe(manifest: dict, status: str) -> str:
-    return f"{shlex.join(manifest['command'])}, started {manifest.get('started')}, {status}"
-
-
 def _offer(flags: dict, option: str, purpose: str) -> str:
     return f"pass {flags[option]} {purpose}"
-
-
-def _remove_listed(folder: Path, files) -> list:
-    """Remove the listed files that exist, then the folders they leave empty; return the files removed."""
-    removed, parents = [], set()
-    for file in files:
-        target = _inside(folder, file)
-        if target is None:
-            logger.warning("not removing %r listed in %s: it is not inside the folder", file, folder / MANIFEST_NAME)
-            continue
-        if target.is_dir() and not target.is_symlink():
-            logger.warning("not removing %s: the manifest lists it but it is a folder", target)
-            continue
-        with contextlib.suppress(FileNotFoundError):
-            target.unlink()
-            removed.append(target)
-            parents.update(parent for parent in target.parents if folder in parent.parents)
-    for parent in sorted(parents, key=lambda p: len(p.parts), reverse=True):  # deepest first
-        with contextlib.suppress(OSError):
-            parent.rmdir()  # only succeeds on a folder left empty
-    if removed:
-        logger.info("removed %d file(s) of the previous run in %s", len(removed), folder)
-    return removed

@@ -1,0 +1,281 @@
+"""The Delaunay backend of :func:`meshing.tetrahedralize.tetrahedralize`: Delaunay of Steiner points
+(the seed's method).
+
+A BCC lattice of cube edge ``size``, jittered by a seeded random generator, is kept inside the surface
+and away from it; with the surface vertices and a band of points just outside, scipy's Delaunay
+triangulates everything, and the tets whose centroid lies inside the surface are kept, so every
+surface vertex is a mesh node. Before that, the surface vertices slide slightly along the surface
+(:func:`_slid_along_surface`) so that grids of cocircular points stop being degenerate. After it,
+flat and sliver tets on the boundary are peeled off (:func:`_peel_slivers`), surface vertices left in
+no tet get one (:func:`_covering`), and boundary edges or vertices that are not manifold are fixed by
+adding the band tets around them or dropping kept ones (:func:`_repair_boundary`); each step is logged.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from meshing.geometry import signed_tet_volumes
+from meshing.mesh import TET_FACES
+from meshing.surface_winding import winding_numbers
+from meshing.tolerances import SAME_PLANE_COSINE, ZERO_VOLUME
+
+__all__: list[str] = []
+
+# The logger of tetrahedralize(), which this backend serves: one name to configure for both.
+logger = logging.getLogger("meshing.tetrahedralize")
+
+# The tuning, in units of `size`, in one place.
+_JITTER = 0.1  # lattice points move by up to this much in each coordinate (breaks ties, stays well shaped)
+_CLEARANCE = 0.5  # lattice points closer than this to the surface are dropped (they would make slivers)
+_BAND = 0.5  # band points sit this far outside the surface, along the vertex normals
+_SLIVER_RADIUS_RATIO = 0.05  # boundary tets below this radius ratio are peeled off
+_REPAIR_ROUNDS = 8
+_SMOOTH_COSINE = np.cos(np.radians(30.0))  # a vertex whose faces all lie within 30 deg of its normal is smooth
+
+
+def _delaunay_tets(surface, size, seed, movable_surface):
+    """(points, tets) filling ``surface`` (a checked ``trimesh.Trimesh``) with tets of edge about ``size`` [m];
+    ``movable_surface``: whether the surface's own vertices may move (a built-in shape's triangulation; a
+    loaded surface keeps them where they are)."""
+    import trimesh
+    from scipy.spatial import Delaunay, cKDTree
+
+    from meshing.quality import _raw_metrics
+
+    rng = np.random.default_rng(seed)
+    movable = np.ones(len(surface.vertices), dtype=bool) if movable_surface else np.zeros(len(surface.vertices), bool)
+    # Edges up to sqrt(2) size are what a grid of spacing size has across its diagonals: leave those alone.
+    if surface.edges_unique_length.max() > 1.5 * size:
+        vertices, faces = trimesh.remesh.subdivide_to_size(surface.vertices, surface.faces, max_edge=size, max_iter=30)
+        movable = np.r_[movable, np.ones(len(vertices) - len(movable), dtype=bool)]  # new vertices come last
+        surface = trimesh.Trimesh(vertices, faces, process=False)
+        logger.info("subdivided the surface to edges <= size: %d vertices", len(surface.vertices))
+    surface = _slid_along_surface(surface, movable, rng)
+    vertices, faces = surface.vertices, surface.faces
+    # Distances to the surface, approximated by a dense sample of it (vertices, edge midpoints, face centres).
+    sample = np.concatenate([vertices, vertices[surface.edges_unique].mean(axis=1), surface.triangles_center])
+    near = cKDTree(sample)
+
+    # BCC lattice (cube corners plus cube centres): its Delaunay tets are well shaped, unlike a cubic lattice's.
+    low, high = surface.bounds
+    grid = np.stack(np.meshgrid(*(np.arange(a - size, b + size, size) for a, b in zip(low, high)), indexing="ij"), -1)
+    lattice = np.concatenate([grid.reshape(-1, 3), grid.reshape(-1, 3) + size / 2])
+    lattice += rng.uniform(-_JITTER * size, _JITTER * size, lattice.shape)
+    lattice = lattice[winding_numbers(vertices, faces, lattice) > 0]
+    lattice = lattice[near.query(lattice)[0] >= _CLEARANCE * size]
+
+    band = vertices + _BAND * size * surface.vertex_normals
+    # In tight concave spots the offset points can land inside the body or crowd the surface: drop those.
+    band = band[(winding_numbers(vertices, faces, band) == 0) & (near.query(band)[0] >= 0.5 * _BAND * size)]
+    band = band[_thinned(band, 0.5 * size)]
+
+    points = np.concatenate([vertices, lattice, band])
+    surface_count = len(vertices)
+    triangulation = Delaunay(points)
+    if len(triangulation.coplanar):
+        logger.warning("qhull left out %d point(s) as coincident", len(triangulation.coplanar))
+    tets = triangulation.simplices.astype(np.int64)
+    flip = signed_tet_volumes(points, tets) < 0
+    tets[flip] = tets[flip][:, [0, 1, 3, 2]]
+    centroids = points[tets].mean(axis=1)
+    inside = winding_numbers(vertices, faces, centroids) > 0
+    # The band: tets outside the surface whose centroid lies within the offset surface through the band points.
+    offset = vertices + _BAND * size * surface.vertex_normals
+    in_band = ~inside & (winding_numbers(offset, faces, centroids) > 0)
+    # Tets made of band points only are the slivers of the convex hull's skin, not part of the band layer.
+    in_band &= ~(tets >= surface_count + len(lattice)).all(axis=1)
+    volumes, _, ratio = _raw_metrics(points, tets)
+    flat = volumes <= ZERO_VOLUME * np.ptp(points[tets], axis=1).max(axis=1) ** 3  # the TetMesh zero-volume rule
+    sliver = flat | (ratio < _SLIVER_RADIUS_RATIO)
+    keep = inside & ~flat
+    logger.info("delaunay: %d points (%d surface, %d lattice, %d band), %d tets, %d kept (%s)", len(points),
+                surface_count, len(lattice), len(band), len(tets), keep.sum(), "centroid inside")
+    keep = _peel_slivers(tets, keep, sliver)
+    # Band tets glued to a flat tet would wall it in: a zero-volume void with two different triangulations
+    # of one planar quad on its sides, which no choice of tets can make manifold. Never add those.
+    addable = in_band & ~sliver & ~_touches_flat(tets, flat, len(points))
+    keep = _covering(tets, keep, addable | (inside & ~flat), ratio, surface_count)
+    keep = _repair_boundary(tets, keep, addable, len(points), surface_count)
+    interior_slivers = (keep & sliver).sum()
+    if interior_slivers:
+        logger.info("delaunay: kept %d interior sliver(s) (radius ratio < %g) to avoid voids",
+                    interior_slivers, _SLIVER_RADIUS_RATIO)
+    return points, tets[keep]
+
+
+def _slid_along_surface(surface, movable, rng):
+    """Move the movable vertices within their flat neighbourhood or along their straight crease by up to
+    0.1 x their shortest edge (curved ones: 0.05 x, in their tangent plane), so that grids of cocircular
+    points stop being degenerate for Delaunay: qhull triangulates such ties with flat tets whose removal
+    tears the boundary or leaves a void. Flat and crease moves leave the surface as a point set unchanged."""
+    import trimesh
+
+    vertex_faces = surface.vertex_faces  # (n, k) padded with -1
+    normals = np.vstack([surface.face_normals, np.full((1, 3), np.nan)])[vertex_faces]  # (n, k, 3), nan padding
+    first = normals[:, 0]
+    along_first = np.abs(np.einsum("nkj,nj->nk", normals, first))
+    # The incident normal least parallel to the first one: a crease's second plane.
+    other = normals[np.arange(len(normals)), np.nanargmin(np.where(np.isnan(along_first), np.inf, along_first), axis=1)]
+    along_other = np.abs(np.einsum("nkj,nj->nk", normals, other))
+    same_plane = 1 - SAME_PLANE_COSINE  # normals of one flat facet agree to round-off
+    padding = np.isnan(along_first)
+    flat = ((along_first > same_plane) | padding).all(axis=1)
+    crease = ~flat & ((along_first > same_plane) | (along_other > same_plane) | padding).all(axis=1)
+    direction = rng.normal(size=(len(first), 3))
+    direction[flat] -= np.einsum("nj,nj->n", direction[flat], first[flat])[:, None] * first[flat]
+    line = np.cross(first[crease], other[crease])
+    line /= np.linalg.norm(line, axis=1)[:, None]
+    direction[crease] = line * rng.choice([-1.0, 1.0], size=(len(line), 1))
+    # Curved vertices (movable ones only: built-in shapes) slide in their tangent plane, which breaks the
+    # mirror symmetries of icospheres and tori; they leave the exact surface by (step)^2 / (2 rho) at most.
+    # A sharp vertex (a box corner: three planes) is not curved: it stays where it is.
+    curved = ~flat & ~crease
+    spread = np.einsum("nkj,nj->nk", normals, surface.vertex_normals)
+    smooth = (np.isnan(spread) | (spread > _SMOOTH_COSINE)).all(axis=1)
+    normal = surface.vertex_normals[curved]
+    direction[curved] -= np.einsum("nj,nj->n", direction[curved], normal)[:, None] * normal
+    direction /= np.linalg.norm(direction, axis=1)[:, None]
+    shortest = np.full(len(first), np.inf)
+    np.minimum.at(shortest, surface.edges_unique.ravel(), np.repeat(surface.edges_unique_length, 2))
+    step = np.where(movable & (smooth | ~curved),
+                    np.where(curved, 0.05, 0.1) * shortest * rng.uniform(0.2, 1.0, len(first)), 0.0)
+    vertices = surface.vertices + step[:, None] * direction
+    # Keep no move that turns a face over (cannot happen at 0.1 x the shortest edge on sane grids; checked anyway).
+    turned = np.einsum("ij,ij->i", trimesh.triangles.normals(vertices[surface.faces])[0], surface.face_normals) < 0.5
+    vertices[np.unique(surface.faces[turned])] = surface.vertices[np.unique(surface.faces[turned])]
+    return trimesh.Trimesh(vertices, surface.faces, process=False)
+
+
+def _touches_flat(tets, flat, node_count):
+    """(m,) bool -- tets that share a face with a flat tet."""
+    faces = np.sort(tets[:, TET_FACES], axis=2).reshape(-1, 3)
+    key = (faces[:, 0] * node_count + faces[:, 1]) * node_count + faces[:, 2]
+    flat_faces = key[np.repeat(flat, 4)]
+    return np.isin(key, flat_faces).reshape(-1, 4).any(axis=1) & ~flat
+
+
+def _thinned(points, distance):
+    """(k,) bool -- keep at most one of any group of points closer than ``distance``."""
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(points).query_pairs(distance, output_type="ndarray")
+    keep = np.ones(len(points), dtype=bool)
+    keep[pairs.max(axis=1)] = False
+    return keep
+
+
+def _face_counts(tets, keep, node_count):
+    """For every tet, how many of its faces lie on the boundary of the kept set."""
+    faces = np.sort(tets[:, TET_FACES], axis=2).reshape(-1, 3)
+    key = (faces[:, 0] * node_count + faces[:, 1]) * node_count + faces[:, 2]
+    kept_faces = np.repeat(keep, 4)
+    _, inverse, counts = np.unique(key[kept_faces], return_inverse=True, return_counts=True)
+    on_boundary = np.zeros(len(key), dtype=bool)
+    on_boundary[np.flatnonzero(kept_faces)] = counts[inverse] == 1
+    return on_boundary.reshape(-1, 4).sum(axis=1)
+
+
+def _peel_slivers(tets, keep, sliver):
+    """Drop slivers that show a face on the boundary, repeatedly (each drop exposes the next layer)."""
+    node_count = int(tets.max()) + 1
+    dropped = 0
+    for _ in range(_REPAIR_ROUNDS):  # a few rounds of whole-mesh vector operations
+        exposed = keep & sliver & (_face_counts(tets, keep, node_count) > 0)
+        if not exposed.any():
+            break
+        keep = keep & ~exposed
+        dropped += exposed.sum()
+    if dropped:
+        logger.info("delaunay: dropped %d boundary sliver(s) (radius ratio < %g or flat)", dropped,
+                    _SLIVER_RADIUS_RATIO)
+    return keep
+
+
+def _boundary_defects(tets, keep, node_count):
+    """Nodes on boundary edges not shared by exactly two boundary faces, else nodes where boundary sheets touch."""
+    kept = tets[keep]
+    faces = kept[:, TET_FACES].reshape(-1, 3)
+    key = np.sort(faces, axis=1)
+    key = (key[:, 0] * node_count + key[:, 1]) * node_count + key[:, 2]
+    _, first, counts = np.unique(key, return_index=True, return_counts=True)
+    boundary = faces[first[counts == 1]]
+    edges = np.sort(boundary[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    edge_key, edge_counts = np.unique(edges[:, 0] * node_count + edges[:, 1], return_counts=True)
+    bad = edge_key[edge_counts != 2]
+    if len(bad):
+        return np.unique(np.concatenate([bad // node_count, bad % node_count]))
+    return _multi_fan_nodes(boundary, node_count)
+
+
+def _multi_fan_nodes(boundary, node_count):
+    """Nodes around which the boundary faces form more than one fan (edge-connected group)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    import trimesh
+
+    mesh = trimesh.Trimesh(np.zeros((node_count, 3)), boundary, process=False)
+    pairs, shared = mesh.face_adjacency, mesh.face_adjacency_edges
+    def corner(side, end):  # index of the face corner at the shared edge's end vertex
+        return pairs[:, side] * 3 + np.argmax(boundary[pairs[:, side]] == shared[:, end, None], axis=1)
+
+    rows = np.concatenate([corner(0, 0), corner(0, 1)])
+    cols = np.concatenate([corner(1, 0), corner(1, 1)])
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(boundary.size, boundary.size))
+    _, labels = connected_components(graph, directed=False)
+    fan_key = np.unique(boundary.ravel() * boundary.size + labels)
+    fans = np.bincount(fan_key // boundary.size, minlength=node_count)
+    return np.flatnonzero(fans > 1)
+
+
+def _covering(tets, keep, usable, ratio, surface_count):
+    """Add, for each surface vertex in no kept tet, its best-shaped usable tet (logged)."""
+    uncovered = np.flatnonzero(np.bincount(tets[keep].ravel(), minlength=surface_count)[:surface_count] == 0)
+    if len(uncovered) == 0:
+        return keep
+    candidates = np.flatnonzero(~keep & usable & np.isin(tets, uncovered).any(axis=1))
+    candidates = candidates[np.argsort(-ratio[candidates], kind="stable")]
+    holds = np.isin(tets[candidates], uncovered)
+    owner, owner_tet = tets[candidates][holds], np.repeat(candidates, holds.sum(axis=1))
+    _, first = np.unique(owner, return_index=True)
+    keep = keep.copy()
+    keep[owner_tet[first]] = True
+    logger.info("delaunay: %d surface vertices were in no kept tet; added %d tet(s) around them",
+                len(uncovered), len(np.unique(owner_tet[first])))
+    return keep
+
+
+def _repair_boundary(tets, keep, addable, node_count, surface_count):
+    """Make the boundary a 2-manifold: at each round, around the defective nodes, either add the band tets
+    there or drop the kept tets that show two or more boundary faces, whichever leaves fewer defects."""
+    added = removed = 0
+    nodes = _boundary_defects(tets, keep, node_count)
+    for _ in range(_REPAIR_ROUNDS):
+        if len(nodes) == 0:
+            break
+        touching = np.isin(tets, nodes).any(axis=1)
+        grow = touching & ~keep & addable
+        shrink = touching & keep & (_face_counts(tets, keep, node_count) >= 2)
+        # Never drop the last kept tet of a surface vertex.
+        left = np.bincount(tets[keep & ~shrink].ravel(), minlength=node_count)
+        shrink &= ~np.isin(tets, np.flatnonzero(left[:surface_count] == 0)).any(axis=1)
+        options = [(keep | grow, grow.sum(), 0), (keep & ~shrink, 0, shrink.sum()),
+                   (keep & ~shrink | grow, grow.sum(), shrink.sum())]
+        results = [(len(_boundary_defects(tets, option, node_count)), i) for i, (option, _, _) in enumerate(options)]
+        best_count, best = min(results)
+        if best_count >= len(nodes) and best_count > 0 and _ > 2:
+            break
+        keep, plus, minus = options[best]
+        added, removed = added + plus, removed + minus
+        nodes = _boundary_defects(tets, keep, node_count)
+    if added or removed:
+        logger.info("delaunay: made the boundary manifold by adding %d band tet(s) and dropping %d tet(s)",
+                    added, removed)
+    remaining = _boundary_defects(tets, keep, node_count)
+    if len(remaining):
+        logger.warning("delaunay: %d boundary node(s) are still not manifold; try another size or seed",
+                       len(remaining))
+    return keep
