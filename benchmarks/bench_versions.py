@@ -3,7 +3,9 @@
 For each size (structured beams of about 1k and 10k nodes, 1 m x 0.2 m x 0.2 m, pinned at x = 0,
 under gravity, E = 1e7 Pa, nu = 0.45 as in the README, dt = 0.01 s) both versions take the same
 steps in child processes launched alternately (baseline, ours, baseline, ours, ...), and the script
-prints the median seconds per step of each and their ratio, and the mean CG iterations per step.
+prints the median CPU seconds per step of each (the median over the steps of a child, then over the
+children) and their ratio, the same in sparse mat-vecs of the step's system matrix timed in the same
+child (robust to the machine's speed drifting between children), and the mean CG iterations per step.
 A contact scene (two cubes, the lower one pinned at its base, the upper one pressed onto it by a
 strong gravity through the penalty contact force) reports the CG iterations per step, where the
 contact stiffness is a non-spring Jacobian.
@@ -64,12 +66,23 @@ CHILD = textwrap.dedent('''
     integrator = ImplicitEuler()
     for _ in range(3):
         state = integrator.step(scene, state, 0.01)
-    iterations, start = [], time.perf_counter()
+    iterations, seconds = [], []
     for _ in range(steps):
+        start = time.process_time()  # CPU time of this process: other jobs on the machine do not count
         state = integrator.step(scene, state, 0.01)
+        seconds.append(time.process_time() - start)
         iterations.append(integrator.last_solve.iterations)
-    seconds = (time.perf_counter() - start) / steps
-    print(json.dumps({"nodes": model.node_count, "seconds": seconds, "iterations": float(np.mean(iterations))}))
+    seconds = float(np.median(seconds))
+    # One sparse mat-vec of this step's system matrix, timed in the same process: the step in mat-vecs
+    # does not move with the machine's speed, which varies by 10-20 % from run to run here.
+    matrix = integrator.linear_system(scene, state, 0.01)[0]
+    vector, matvecs = np.ones(matrix.shape[0]), []
+    for _ in range(200):
+        start = time.process_time()
+        matrix @ vector
+        matvecs.append(time.process_time() - start)
+    print(json.dumps({"nodes": model.node_count, "seconds": seconds, "iterations": float(np.mean(iterations)),
+                      "matvec": float(np.median(matvecs))}))
 ''')
 
 
@@ -112,7 +125,7 @@ def main(argv=None) -> None:
         cases = [("beam", _beam_cells(n)) for n in args.nodes] + [("contact", args.contact_cells)]
         print(f"implicit Euler, dt = 0.01 s, median of {args.rounds} alternating runs of {args.steps} steps")
         print(f"{'scene':>8} {'nodes':>7} {args.ref + ' [ms]':>14} {'ours [ms]':>10} {'ratio':>6}"
-              f" {'CG ' + args.ref:>10} {'CG ours':>8}")
+              f" {args.ref + ' [mv]':>14} {'ours [mv]':>10} {'ratio':>6} {'CG ' + args.ref:>10} {'CG ours':>8}")
         for kind, cells in cases:
             measured = {"base": [], "ours": []}
             for _ in range(args.rounds):
@@ -120,9 +133,11 @@ def main(argv=None) -> None:
                 measured["ours"].append(run(ours, script, kind, cells, args.steps))
             base = statistics.median(r["seconds"] for r in measured["base"])
             mine = statistics.median(r["seconds"] for r in measured["ours"])
+            base_mv = statistics.median(r["seconds"] / r["matvec"] for r in measured["base"])
+            mine_mv = statistics.median(r["seconds"] / r["matvec"] for r in measured["ours"])
             print(f"{kind:>8} {measured['ours'][0]['nodes']:>7} {1e3 * base:>14.2f} {1e3 * mine:>10.2f} "
-                  f"{mine / base:>6.2f} {measured['base'][0]['iterations']:>10.1f} "
-                  f"{measured['ours'][0]['iterations']:>8.1f}")
+                  f"{mine / base:>6.2f} {base_mv:>14.1f} {mine_mv:>10.1f} {mine_mv / base_mv:>6.2f} "
+                  f"{measured['base'][0]['iterations']:>10.1f} {measured['ours'][0]['iterations']:>8.1f}")
 
 
 def _beam_cells(nodes: int) -> str:

@@ -369,4 +369,8 @@ class ImplicitEuler(Integrator):
         return State(x1, v1, t0 + h, state.step + 1, memory)
 
     def _solve(self, cache, system, b, warm):
+        if system.extra is not None and self.method == "amg":
+            # Contact changes from step to step: the fine level of the kept hierarchy gets the current
+            # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay.
+            cache.solver.refresh(system.matrix + system.extra)
         return cache.solver.solve(system.matrix, b, x0=warm, extra=system.extra)
