@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from meshing import TetMesh, structured_box
@@ -52,3 +53,17 @@ def signal_when_ready(module_argv, ready, signum, *, settle=0.0, timeout=120.0):
             child.kill()
             child.wait()
     return child.returncode, stderr
+
+
+def rewritten_archive(path, target, **changes):
+    """A copy of an .npz archive with some entries replaced (None: removed), written with plain numpy:
+    how the file-format tests make damaged, foreign and future files."""
+    with np.load(path) as archive:
+        arrays = {name: archive[name] for name in archive.files}
+    for name, value in changes.items():
+        if value is None:
+            del arrays[name]
+        else:
+            arrays[name] = value
+    np.savez_compressed(target, **arrays)
+    return target

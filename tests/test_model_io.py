@@ -3,6 +3,8 @@
 import numpy as np
 import pytest
 
+from conftest import rewritten_archive
+
 from meshing import add_shells, structured_box
 from volspring import Material, Model, load_model, save_model
 from volspring.bodies import Body
@@ -100,21 +102,9 @@ def test_an_element_set_of_unknown_type_is_refused_not_dropped(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def _rewritten(path, target, **changes):
-    with np.load(path) as archive:
-        arrays = {name: archive[name] for name in archive.files}
-    for name, value in changes.items():
-        if value is None:
-            del arrays[name]
-        else:
-            arrays[name] = value
-    np.savez_compressed(target, **arrays)
-    return target
-
-
 def test_a_newer_version_is_refused_naming_file_and_versions(tmp_path):
     path = save_model(tmp_path / "model.vsmodel.npz", shelled_model())
-    newer = _rewritten(path, tmp_path / "newer.vsmodel.npz", version=np.asarray(999))
+    newer = rewritten_archive(path, tmp_path / "newer.vsmodel.npz", version=np.asarray(999))
     with pytest.raises(ValueError, match=rf"newer.vsmodel.npz has model format version 999; this volspring reads "
                                          rf"version\(s\) {MODEL_VERSION} \(written by a newer volspring"):
         load_model(newer)
@@ -134,7 +124,7 @@ def test_a_newer_version_is_refused_naming_file_and_versions(tmp_path):
 ])
 def test_garbled_files_are_refused_naming_file_and_array(tmp_path, make, changes, message):
     path = save_model(tmp_path / "good.vsmodel.npz", make())
-    bad = _rewritten(path, tmp_path / "model.vsmodel.npz", **changes)
+    bad = rewritten_archive(path, tmp_path / "model.vsmodel.npz", **changes)
     with pytest.raises(ValueError, match=message):
         load_model(bad)
 

@@ -5,6 +5,8 @@ import zipfile
 import numpy as np
 import pytest
 
+from conftest import rewritten_archive
+
 from meshing import SpringTopology, add_shells, read_topology, structured_box, write_topology
 from meshing.topology_io import TOPOLOGY_SUFFIX, TOPOLOGY_VERSION
 
@@ -18,19 +20,6 @@ def _fields(topology):
     return {"mesh.points": topology.mesh.points, "mesh.tets": topology.mesh.tets, "points": topology.points,
             "springs": topology.springs, "kinds": topology.kinds, "shell_triangles": topology.shell_triangles,
             "shell_layer": topology.shell_layer}
-
-
-def _rewritten(path, target, **changes):
-    """A copy of an archive with some entries replaced (None: removed), written with plain numpy."""
-    with np.load(path) as archive:
-        arrays = {name: archive[name] for name in archive.files}
-    for name, value in changes.items():
-        if value is None:
-            del arrays[name]
-        else:
-            arrays[name] = value
-    np.savez_compressed(target, **arrays)
-    return target
 
 
 @pytest.mark.parametrize("layers", [0, 2])
@@ -57,7 +46,7 @@ def test_units_scale_every_length(tmp_path, shelled):
 
 def test_a_newer_version_is_refused_naming_file_and_versions(tmp_path, shelled):
     path = write_topology(tmp_path / "body.vstopo.npz", shelled)
-    newer = _rewritten(path, tmp_path / "newer.vstopo.npz", version=np.asarray(999))
+    newer = rewritten_archive(path, tmp_path / "newer.vstopo.npz", version=np.asarray(999))
     with pytest.raises(ValueError, match=rf"newer.vstopo.npz has spring topology format version 999; this "
                                          rf"volspring reads version\(s\) {TOPOLOGY_VERSION} \(written by a newer"):
         read_topology(newer)
@@ -65,7 +54,7 @@ def test_a_newer_version_is_refused_naming_file_and_versions(tmp_path, shelled):
 
 def test_another_format_is_refused(tmp_path, shelled):
     path = write_topology(tmp_path / "body.vstopo.npz", shelled)
-    other = _rewritten(path, tmp_path / "model.npz", format=np.asarray("volspring.model"))
+    other = rewritten_archive(path, tmp_path / "model.npz", format=np.asarray("volspring.model"))
     with pytest.raises(ValueError, match="model.npz holds format 'volspring.model', not 'volspring.spring_topology'"):
         read_topology(other)
     plain = tmp_path / "plain.npz"
@@ -109,7 +98,7 @@ def test_a_corrupt_array_is_refused_naming_file_and_array(tmp_path, shelled):
 ])
 def test_missing_or_garbled_arrays_are_named(tmp_path, shelled, changes, message):
     path = write_topology(tmp_path / "body.vstopo.npz", shelled)
-    bad = _rewritten(path, tmp_path / "bad.vstopo.npz", **changes)
+    bad = rewritten_archive(path, tmp_path / "bad.vstopo.npz", **changes)
     with pytest.raises(ValueError, match=r"bad\.vstopo\.npz .*" + message):
         read_topology(bad)
 
@@ -118,12 +107,12 @@ def test_the_topology_checks_run_on_load(tmp_path, shelled):
     path = write_topology(tmp_path / "body.vstopo.npz", shelled)
     springs = shelled.springs.copy()
     springs[3, 1] = shelled.node_count + 5  # a node that does not exist
-    bad = _rewritten(path, tmp_path / "bad.vstopo.npz", springs=springs)
+    bad = rewritten_archive(path, tmp_path / "bad.vstopo.npz", springs=springs)
     with pytest.raises(ValueError, match=r"bad.vstopo.npz holds an invalid spring topology: springs index nodes"):
         read_topology(bad)
     tets = shelled.mesh.tets[:, [1, 0, 2, 3]]  # every tet inverted: TetMesh itself refuses it
     with pytest.raises(ValueError, match=r"bad2.vstopo.npz holds an invalid spring topology: .*negatively oriented"):
-        read_topology(_rewritten(path, tmp_path / "bad2.vstopo.npz", tets=tets))
+        read_topology(rewritten_archive(path, tmp_path / "bad2.vstopo.npz", tets=tets))
 
 
 def test_kind_codes_follow_their_labels(tmp_path, shelled):
@@ -131,10 +120,10 @@ def test_kind_codes_follow_their_labels(tmp_path, shelled):
     path = write_topology(tmp_path / "body.vstopo.npz", shelled)
     order = np.array([3, 2, 1, 0])  # new code of each old code
     names = np.asarray(["shell_edge", "shell_diagonal", "shell", "tet_edge"])
-    moved = _rewritten(path, tmp_path / "moved.vstopo.npz", kinds=order[shelled.kinds].astype(np.int8),
+    moved = rewritten_archive(path, tmp_path / "moved.vstopo.npz", kinds=order[shelled.kinds].astype(np.int8),
                        kind_names=names)
     assert np.array_equal(read_topology(moved).kinds, shelled.kinds)
-    unknown = _rewritten(path, tmp_path / "unknown.vstopo.npz",
+    unknown = rewritten_archive(path, tmp_path / "unknown.vstopo.npz",
                          kind_names=np.asarray(["tet_edge", "bending", "a", "b"]))
     with pytest.raises(ValueError, match=r"unknown.vstopo.npz uses kind_names 'bending', 'a', 'b' unknown"):
         read_topology(unknown)
