@@ -34,7 +34,7 @@ import scipy.sparse.linalg as sla  # noqa: E402
 
 from meshing import TetMesh  # noqa: E402
 from volspring import Gravity, Material, Pins, Scene, Model  # noqa: E402
-from volspring.assembly import BlockPattern, linearize_springs  # noqa: E402
+from volspring.assembly import BlockPattern  # noqa: E402
 from volspring.integrators.implicit import ImplicitEuler  # noqa: E402
 
 LENGTH, WIDTH = 1.0, 0.2
@@ -75,7 +75,7 @@ def beam_mesh(target_nodes: int) -> TetMesh:
 def omega_max(model, scene) -> float:
     """sqrt of the largest eigenvalue of M^-1 K over the free nodes [rad/s]."""
     pattern = BlockPattern(model, scene.free)
-    stiffness = pattern.matrix(linearize_springs(pattern, model.rest_positions, stiffness_scale=1.0).blocks).tocsr()
+    stiffness = pattern.matrix(pattern.linearize(model.rest_positions, stiffness_scale=1.0).blocks).tocsr()
     inverse_sqrt_mass = sp.diags(np.repeat(model.masses[pattern.free_nodes], 3) ** -0.5)
     scaled = (inverse_sqrt_mass @ stiffness @ inverse_sqrt_mass).tocsr()
     return float(np.sqrt(sla.eigsh(scaled, k=1, which="LA", tol=1e-4, return_eigenvectors=False)[0]))

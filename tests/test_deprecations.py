@@ -43,3 +43,23 @@ def test_unknown_names_are_still_attribute_errors():
     for module in (volspring, volspring.mesh):
         with pytest.raises(AttributeError, match="has no attribute 'no_such_name'"):
             module.no_such_name  # noqa: B018
+
+
+def test_the_former_assembly_functions_warn_and_give_what_the_pattern_methods_give():
+    import numpy as np
+
+    import volspring.assembly as assembly
+    from volspring import Material, Model
+
+    from conftest import cube_mesh
+
+    model = Model.from_mesh(cube_mesh((2, 1, 1)), Material(1e6, 0.3, 1000.0), damping_ratio=0.1)
+    pattern = assembly.BlockPattern(model)
+    x = model.rest_positions * 1.01
+    new = pattern.linearize(x, stiffness_scale=2.0)
+    with pytest.warns(DeprecationWarning, match=r"linearize_springs is deprecated.*BlockPattern\.linearize"):
+        old = assembly.linearize_springs(pattern, x, stiffness_scale=2.0)
+    assert np.array_equal(old.forces, new.forces) and np.array_equal(old.blocks, new.blocks)
+    with pytest.warns(DeprecationWarning, match=r"stiffness_times is deprecated.*BlockPattern\.dfdx_times"):
+        product = assembly.stiffness_times(pattern, new, x)
+    assert np.array_equal(product, pattern.dfdx_times(new, x))

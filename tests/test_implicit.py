@@ -13,7 +13,7 @@ import scipy.sparse.linalg as sla
 from conftest import cube_mesh
 
 from volspring import Drag, Gravity, Material, Pins, Scene, Model
-from volspring.assembly import BlockPattern, linearize_springs
+from volspring.assembly import BlockPattern
 from volspring.errors import SolverNotConverged
 from volspring.integrators.implicit import ImplicitEuler
 from volspring.springs import damper_blocks, spring_forces, spring_stiffness_blocks
@@ -32,7 +32,7 @@ def beam(cells, *, material=RUBBER, damping_ratio=0.0, length=1.0):
 def omega_max(model, free=None) -> float:
     """sqrt(largest eigenvalue of K v = lambda M v) over the free nodes [rad/s]."""
     pattern = BlockPattern(model, free)
-    stiffness = pattern.matrix(linearize_springs(pattern, model.rest_positions, stiffness_scale=1.0).blocks)
+    stiffness = pattern.matrix(pattern.linearize(model.rest_positions, stiffness_scale=1.0).blocks)
     scale = sp.diags(np.repeat(model.masses[pattern.free_nodes], 3) ** -0.5)
     scaled = (scale @ stiffness.tocsr() @ scale).tocsr()
     if scaled.shape[0] <= 1500:
@@ -329,7 +329,7 @@ def test_fused_forces_match_spring_forces():
     x = model.rest_positions + 0.05 * rng.standard_normal(model.rest_positions.shape)
     v = rng.standard_normal(x.shape)
     pattern = BlockPattern(model)
-    lin = linearize_springs(pattern, x, v, stiffness_scale=2.0, damping_scale=3.0)
+    lin = pattern.linearize(x, v, stiffness_scale=2.0, damping_scale=3.0)
     reference = spring_forces(model, x, v)
     assert np.abs(lin.forces - reference).max() <= 1e-12 * np.abs(reference).max()
     blocks = (2.0 * spring_stiffness_blocks(model, x) + 3.0 * damper_blocks(model, x))[pattern.parts[0].order]
@@ -344,7 +344,7 @@ def test_rcm_numbering_gives_the_same_step_as_natural_numbering(deformed_scene):
     masses = scene.model.masses
     matrices = []
     for pattern in (rcm, natural):
-        blocks = linearize_springs(pattern, state.x, stiffness_scale=1e-4, damping_scale=1e-2).blocks
+        blocks = pattern.linearize(state.x, stiffness_scale=1e-4, damping_scale=1e-2).blocks
         matrix = pattern.matrix(blocks, masses[pattern.free_nodes]).toarray()
         position = np.argsort(pattern.free_dofs())  # back to increasing node index
         matrices.append(matrix[np.ix_(position, position)])

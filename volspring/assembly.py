@@ -29,13 +29,30 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from volspring._deprecation import moved_names
+from volspring._deprecation import deprecated_alias
 from volspring.errors import SpringCollapsed
 
-__all__ = ["BlockPattern", "ModelLinearization", "eliminate_held", "held_unknowns", "linearize_springs",
-           "stiffness_matrix", "stiffness_times"]
+__all__ = ["BlockPattern", "ModelLinearization", "eliminate_held", "held_unknowns", "stiffness_matrix"]
 
-__getattr__ = moved_names(__name__, "meshing.geometry", ("rigid_body_modes",))
+
+def _linearize_springs(pattern, x, v=None, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
+    return pattern.linearize(x, v, stiffness_scale=stiffness_scale, damping_scale=damping_scale,
+                             clamp_compression=clamp_compression)
+
+
+def _stiffness_times(pattern, linearization, u):
+    return pattern.dfdx_times(linearization, u)
+
+
+def __getattr__(name):
+    # 0.1 functions that are BlockPattern methods now (every element set, not springs only), and a
+    # geometric kernel that lives in meshing.
+    from meshing.geometry import rigid_body_modes
+
+    return deprecated_alias(__name__, name, {
+        "linearize_springs": ("volspring.assembly.BlockPattern.linearize", _linearize_springs),
+        "stiffness_times": ("volspring.assembly.BlockPattern.dfdx_times", _stiffness_times),
+        "rigid_body_modes": ("meshing.geometry.rigid_body_modes", rigid_body_modes)})
 
 
 @dataclass(eq=False)
@@ -317,12 +334,6 @@ class BlockPattern:
         return out[self.node_rank]
 
 
-def linearize_springs(pattern, x, v=None, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
-    """:meth:`BlockPattern.linearize` (its former name, from when springs were the only element set)."""
-    return pattern.linearize(x, v, stiffness_scale=stiffness_scale, damping_scale=damping_scale,
-                             clamp_compression=clamp_compression)
-
-
 def stiffness_matrix(model, x=None, *, free=None, clamp_compression=True) -> sp.csr_matrix:
     """(3f, 3f) CSR -- the stiffness K = -dF/dx of all element sets over the free nodes' dofs [N/m].
 
@@ -346,11 +357,6 @@ def stiffness_matrix(model, x=None, *, free=None, clamp_compression=True) -> sp.
     pattern = BlockPattern(model, free, ordering="natural")
     x = model.rest_positions if x is None else x
     return pattern.matrix(pattern.linearize(x, stiffness_scale=1.0, clamp_compression=clamp_compression)).tocsr()
-
-
-def stiffness_times(pattern, linearization, u) -> np.ndarray:
-    """(n, 3) float -- dF/dx @ u of all element sets at a linearization [N] (:meth:`BlockPattern.dfdx_times`)."""
-    return pattern.dfdx_times(linearization, u)
 
 
 

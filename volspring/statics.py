@@ -41,7 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from meshing.geometry import rigid_body_modes
-from volspring.assembly import BlockPattern, eliminate_held, held_unknowns, linearize_springs
+from volspring.assembly import BlockPattern, eliminate_held, held_unknowns
 from volspring.errors import SolverNotConverged
 from volspring.solvers import make_linear_solver
 
@@ -144,7 +144,7 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
     conservative = scene.conservative
 
     def evaluate(positions):
-        springs = linearize_springs(pattern, positions, stiffness_scale=1.0, clamp_compression=clamp_compression)
+        springs = pattern.linearize(positions, stiffness_scale=1.0, clamp_compression=clamp_compression)
         load = scene.external_forces(positions, zero, t)
         return springs, load, springs.forces + load
 

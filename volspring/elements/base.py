@@ -178,10 +178,6 @@ class ElementSet(ABC):
         """
         return None
 
-    def stiffness_times(self, x, u, *, clamp_compression=True) -> np.ndarray:
-        """(n, 3) float -- K(x) @ u, K = -dF/dx of the set [N]."""
-        return _block_product(self, self.stiffness_blocks(x, clamp_compression=clamp_compression), u)
-
     def check(self, node_count: int) -> None:
         """Refuse a stencil that is not (e, k) integer node indices below ``node_count``."""
         stencil = np.asarray(self.stencil)

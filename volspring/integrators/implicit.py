@@ -41,12 +41,13 @@ import logging
 import math
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
 from meshing.geometry import rigid_body_modes
-from volspring.assembly import BlockPattern, eliminate_held, held_unknowns, linearize_springs, stiffness_times
+from volspring.assembly import BlockPattern, eliminate_held, held_unknowns
 from volspring.integrators.base import Integrator
 from volspring.integrators.cache import SolverCache
 from volspring.scene import Scene, State
@@ -94,7 +95,7 @@ class _System:
 
     matrix: sp.bsr_matrix
     extra: sp.csr_matrix | None
-    springs: object  # SpringLinearization: blocks h^2 H + h D, directions, spring forces
+    springs: object  # ModelLinearization: every element set's forces and blocks h^2 K + h C
     forces: np.ndarray  # (n, 3) all forces at (x, v, t) [N]
     assembly_seconds: float
     extra_full: sp.csr_matrix | None  # -h dF/dv - h^2 dF/dx of scene forces, all unknowns
@@ -109,6 +110,13 @@ class _System:
         b = b.copy()
         b[self.held] = 0.0
         return b + self.held_rhs
+
+    @cached_property
+    def whole(self) -> sp.bsr_matrix:
+        """The matrix with the extra term added, BSR with 3x3 blocks (what the AMG hierarchy is given)."""
+        if self.extra is None:
+            return self.matrix
+        return sp.bsr_matrix(self.matrix + self.extra, blocksize=(3, 3))
 
 
 class ImplicitEuler(Integrator):
@@ -205,7 +213,7 @@ class ImplicitEuler(Integrator):
         (:func:`eliminate_held`), with ``prescribed`` (n, 3), the velocity change they must make,
         moved into the right-hand side.
         """
-        springs = linearize_springs(pattern, x, v, stiffness_scale=h * h, damping_scale=h,
+        springs = pattern.linearize(x, v, stiffness_scale=h * h, damping_scale=h,
                                     clamp_compression=self.clamp_compression)
         forces = scene.external_forces(x, v, t, out=springs.forces)
         clock = self.timer()
@@ -270,9 +278,7 @@ class ImplicitEuler(Integrator):
     def _build(self, cache, pattern, system, x, step, t, dt, v):
         # A Jacobian outside the block pattern (contact couples nodes of different bodies) goes into
         # the hierarchy too, so that the preconditioner sees the contact stiffness CG iterates on.
-        matrix = system.matrix if system.extra is None else \
-            sp.bsr_matrix(system.matrix + system.extra, blocksize=(3, 3))
-        seconds = cache.solver.build(matrix, rigid_body_modes(x[pattern.free_nodes]))
+        seconds = cache.solver.build(system.whole, rigid_body_modes(x[pattern.free_nodes]))
         cache.built(pattern, step, t, dt, x, v)
         return seconds
 
@@ -298,7 +304,7 @@ class ImplicitEuler(Integrator):
         f0 = system.forces
         forces_seconds = self.timer() - clock - system.assembly_seconds
         clock = self.timer()
-        rhs = h * f0 + (h * h) * stiffness_times(pattern, system.springs, v0)
+        rhs = h * f0 + (h * h) * pattern.dfdx_times(system.springs, v0)
         if system.extra_dfdx is not None:
             rhs += (h * h) * (system.extra_dfdx @ v0.ravel()).reshape(-1, 3)
         if dv_prescribed.any():
@@ -372,5 +378,5 @@ class ImplicitEuler(Integrator):
         if system.extra is not None and self.method == "amg":
             # Contact changes from step to step: the fine level of the kept hierarchy gets the current
             # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay.
-            cache.solver.refresh(system.matrix + system.extra)
+            cache.solver.refresh(system.whole)
         return cache.solver.solve(system.matrix, b, x0=warm, extra=system.extra)
