@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from volspring._deprecation import deprecated_alias
 from volspring.bodies import checked_body_fields
-from volspring.elements import ElementSet, Springs
+from volspring.elements import ElementSet, NodalStrain, Springs
 from volspring.elements.spring_rules import FORCE_LAWS, STIFFNESS_RULES, _effective_stiffness, springs_from_topology
 from volspring.elements.springs import checked_pairs, per_item_array
 from volspring.material import Material, _real_array, _real_number, _shown
@@ -61,6 +61,8 @@ class Model:
     materials : sequence of Material or None, optional -- one per body; default ``(material,)``
         for every body
     body_names : sequence of str, optional -- one per body; default all ""
+    rung : str -- the model's rung of the ladder (:data:`volspring.ladder.MODELS`), "springs" by
+        default; a model built from arrays or with extra element sets keeps the name it was given
 
     Use :meth:`from_mesh`, :meth:`from_arrays` or :meth:`from_bodies` rather than the constructor,
     and :meth:`with_elements` to add element sets. All refuse input they would misread: a TypeError
@@ -91,6 +93,7 @@ class Model:
     node_body: np.ndarray | None = None
     materials: tuple | None = None
     body_names: tuple | None = None
+    rung: str = "springs"
 
     def __post_init__(self):
         x = _checked_positions("rest_positions", self.rest_positions)
@@ -162,20 +165,40 @@ class Model:
         return cls(positions, masses, (Springs(len(positions), springs, stiffness, damping, rest_lengths, 0),))
 
     @classmethod
-    def from_mesh(cls, body, material: Material, *, rule="van_gelder", stiffness=None, law="hooke",
-                  damping_ratio=None, damping=None) -> "Model":
-        """A model from a tet mesh (or a topology with shells) and a material.
+    def from_mesh(cls, body, material: Material, *, model="springs", rule="van_gelder", stiffness=None,
+                  law="hooke", damping_ratio=None, damping=None, alpha=None, regions=None,
+                  materials=None) -> "Model":
+        """A model from a tet mesh (or a topology with shells) and a material, on a rung of the ladder.
 
         Parameters
         ----------
         body : TetMesh or SpringTopology
-        material : Material
+        material : Material -- of every tet (or every tet whose region ``materials`` does not name)
+        model : {"springs", "springs+volume", "smoothed"} -- the rung (:mod:`volspring.ladder`):
+            springs only, springs with a nodal volume term that honours nu, or the smoothed-strain
+            element (FEM-accurate)
         rule : {"van_gelder", "lloyd", "uniform"} -- stiffness rule (see the module docstring)
         stiffness : float, optional -- the raw constant, >= 0, required by ``rule="uniform"`` only
         law : {"hooke", "strain"} -- how the raw ``uniform`` constant is read (``uniform`` only)
-        damping_ratio : float, optional -- zeta >= 0 per spring (see the module docstring)
-        damping : float or (s,) float, optional -- k_d [N s/m], instead of ``damping_ratio``
+        damping_ratio : float, optional -- zeta >= 0: per spring (see the module docstring); for the
+            continuum sets of the upper rungs, Rayleigh stiffness damping b = 2 zeta / omega_max (zeta
+            at the model's highest frequency, as a spring's ratio is at its own)
+        damping : float or (s,) float, optional -- k_d [N s/m] of the springs, instead of ``damping_ratio``
+        alpha : float, optional -- ``model="smoothed"`` only: the weight in [0, 1] of the nodal
+            (smoothed) shear; default :data:`volspring.ladder.DEFAULT_ALPHA`
+        regions : (m,) int, optional -- a region tag per tet, for ``materials``; on the smoothed rung
+            smoothing domains never cross regions
+        materials : mapping of int to Material, optional -- the material of each region tag
+
+        Raises
+        ------
+        ValueError
+            Besides bad input: ``model="springs+volume"`` for a nu below the spring network's own
+            (the volume term would need a negative coefficient), and ``model="smoothed"`` on a
+            topology with shells (shells are springs).
         """
+        from volspring import ladder
+
         if not isinstance(body, (TetMesh, SpringTopology)):
             raise TypeError(f"body must be a TetMesh or SpringTopology, got {type(body).__name__}")
         topology = body if isinstance(body, SpringTopology) else SpringTopology.from_mesh(body)
@@ -204,9 +227,42 @@ class Model:
             if not np.isfinite(damping_ratio) or damping_ratio < 0:
                 raise ValueError(f"damping_ratio = {damping_ratio} is not finite and >= 0")
 
-        masses, spring_set = springs_from_topology(topology, material, rule=rule, stiffness=stiffness, law=law,
-                                                   damping_ratio=damping_ratio, damping=damping)
-        return cls(topology.points, masses, (spring_set,), topology=topology, material=material, rule=rule)
+        if not isinstance(model, str) or model not in ladder.MODELS:
+            raise ValueError(f"unknown model {model!r}; known: {', '.join(ladder.MODELS)}")
+        if alpha is not None and model != "smoothed":
+            raise ValueError(f"alpha= is the smoothed rung's weight; model={model!r} takes none")
+        mesh = topology.mesh
+        tet_materials = ladder.TetMaterials.of(mesh.tet_count, material, regions=regions, materials=materials)
+        uniform = regions is None
+        moduli, densities = (None, None) if uniform else (tet_materials.E, tet_materials.density)
+        if model == "springs":
+            masses, spring_set = springs_from_topology(topology, material, rule=rule, stiffness=stiffness, law=law,
+                                                       damping_ratio=damping_ratio, damping=damping,
+                                                       tet_moduli=moduli, tet_densities=densities)
+            elements = (spring_set,)
+        elif model == "springs+volume":
+            if rule == "uniform":
+                raise ValueError("model='springs+volume' derives the springs from the material: use rule "
+                                 "'van_gelder' or 'lloyd', not 'uniform'")
+            _, unit = springs_from_topology(topology, material, rule=rule, tet_moduli=np.ones(mesh.tet_count))
+            moduli, kappa = ladder.volume_rung_moduli(mesh, tet_materials, unit)
+            masses, spring_set = springs_from_topology(topology, material, rule=rule, damping_ratio=damping_ratio,
+                                                       damping=damping, tet_moduli=moduli, tet_densities=densities)
+            elements = (spring_set, NodalStrain(topology.points, mesh.tets, 0.0, kappa, regions=tet_materials.regions))
+        else:
+            if topology.shell_node_count:
+                raise ValueError("model='smoothed' takes a tet mesh without shells (shells are springs); "
+                                 "give the TetMesh, or use model='springs'")
+            if rule != "van_gelder" or stiffness is not None or damping is not None:
+                raise ValueError("model='smoothed' has no springs: rule=, stiffness= and damping= do not apply "
+                                 "(damping_ratio= does)")
+            masses, _ = springs_from_topology(topology, material, rule="van_gelder", tet_densities=densities)
+            elements = ladder.smoothed_elements(mesh, tet_materials, alpha=alpha)
+        result = cls(topology.points, masses, elements, topology=topology, material=material,
+                     rule="none" if model == "smoothed" else rule, rung=model)
+        if damping_ratio and model != "springs":
+            result = ladder.with_stiffness_damping(result, damping_ratio)
+        return result
 
     @classmethod
     def from_bodies(cls, bodies) -> "Model":

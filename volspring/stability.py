@@ -92,8 +92,13 @@ def omega_max_bound(system, *, x=None) -> float:
     float -- omega with omega^2 >= every eigenvalue of M^-1 K on the free dofs
     """
     model, free = _model_and_free(system)
-    if model.spring_count == 0 or not free.any():
+    if not model.elements or not free.any():
         return 0.0
+    if any(element_set is not model.spring_elements for element_set in model.elements):
+        # Other element sets: Gershgorin on the assembled matrix of all of them.
+        K = stiffness_matrix(model, x, free=free)
+        rows = np.asarray(abs(K).sum(axis=1)).ravel() / np.repeat(model.masses[free], 3)
+        return float(math.sqrt(rows.max()))
     blocks = _spring_blocks(model, x)
     i, j = model.springs.T
     # Diagonal block of node i: sum of H_e over its springs; |row| sums of it per dof.
@@ -132,7 +137,7 @@ def omega_max_estimate(system, *, x=None, exact_dofs=EXACT_DOFS) -> float:
     from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, eigsh
 
     model, free = _model_and_free(system)
-    if model.spring_count == 0 or not free.any():
+    if not model.elements or not free.any():
         return 0.0
     bound = omega_max_bound(system, x=x)
     A = _free_stiffness(model, free, x)

@@ -47,7 +47,7 @@ FORCE_LAWS = ("hooke", "strain")
 
 
 def springs_from_topology(topology, material, *, rule, stiffness=None, law="hooke", damping_ratio=None,
-                          damping=None) -> tuple:
+                          damping=None, tet_moduli=None, tet_densities=None) -> tuple:
     """Masses and springs of a (checked) topology and material by a stiffness rule.
 
     Parameters
@@ -55,6 +55,8 @@ def springs_from_topology(topology, material, *, rule, stiffness=None, law="hook
     topology : SpringTopology -- a tet mesh's springs, with shells or not
     material : Material
     rule, stiffness, law, damping_ratio, damping -- as for :meth:`volspring.Model.from_mesh` (checked there)
+    tet_moduli, tet_densities : (m,) float, optional -- E [Pa] and density [kg/m^3] of every mesh tet
+        instead of the material's (materials per region; shells keep ``material``)
 
     Returns
     -------
@@ -64,7 +66,12 @@ def springs_from_topology(topology, material, *, rule, stiffness=None, law="hook
     mesh, n = topology.mesh, topology.node_count
     springs, lengths = topology.springs, topology.rest_lengths
     masses = np.zeros(n)
-    masses[: mesh.node_count] = material.density * mesh.node_volumes()
+    if tet_densities is None:
+        masses[: mesh.node_count] = material.density * mesh.node_volumes()
+    else:
+        masses[: mesh.node_count] = np.bincount(mesh.tets.ravel(), minlength=mesh.node_count,
+                                                weights=np.repeat(tet_densities * mesh.tet_volumes / 4, 4))
+    moduli = np.full(mesh.tet_count, material.E) if tet_moduli is None else tet_moduli
     k = np.zeros(len(springs))
     if rule == "uniform":
         k[:] = _effective_stiffness(np.full(len(springs), stiffness), lengths, law)
@@ -73,7 +80,7 @@ def springs_from_topology(topology, material, *, rule, stiffness=None, law="hook
         if (edge_of_spring < 0).any():
             raise ValueError("the topology lacks springs for some tet edges")
         tet_edges = edge_of_spring[mesh.tet_edge_index]  # (m, 6) spring index of each tet edge
-        contributions = _rule_stiffness(rule, material.E, np.repeat(mesh.tet_volumes, 6),
+        contributions = _rule_stiffness(rule, np.repeat(moduli, 6), np.repeat(mesh.tet_volumes, 6),
                                         lengths[tet_edges.ravel()])
         k += np.bincount(tet_edges.ravel(), weights=contributions, minlength=len(springs))
     if topology.shell_node_count:

@@ -1,0 +1,260 @@
+"""The continuum element sets of the ladder's upper rungs (volspring.elements.continuum) and the ladder.
+
+Checked against calculus (forces are minus the energy's gradient, blocks its Hessian), against
+invariance (rigid motions are free), against the patch test (a homogeneous strain is reproduced
+exactly, so E and nu come out exact on any mesh) and against the FEM reference's frequencies.
+"""
+
+import numpy as np
+import pytest
+
+from meshing import TetMesh, structured_box
+from volspring import Material, Model, Scene
+from volspring.elements import CorotatedTets, NodalStrain
+from volspring.elements.base import _block_product
+from volspring.ladder import MODELS, network_moduli, network_poisson_ratio
+
+RNG_SEED = 11
+
+
+def _rotation(seed):
+    q, _ = np.linalg.qr(np.random.default_rng(seed).standard_normal((3, 3)))
+    return q * np.sign(np.linalg.det(q))
+
+
+@pytest.fixture(scope="module")
+def cube():
+    return structured_box((2, 2, 2), (1.0, 1.0, 1.0))
+
+
+@pytest.fixture(scope="module")
+def irregular():
+    """A Delaunay mesh of jittered grid points: no two tets alike (an unstructured mesh for the patch test)."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(RNG_SEED)
+    grid = np.stack(np.meshgrid(*[np.linspace(0, 1, 5)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    interior = ((grid > 0) & (grid < 1)).all(axis=1)
+    grid[interior] += rng.uniform(-0.08, 0.08, (interior.sum(), 3))
+    tets = Delaunay(grid).simplices
+    corners = grid[tets]
+    volumes = np.linalg.det(corners[:, 1:] - corners[:, :1]) / 6
+    tets = tets[np.abs(volumes) > 1e-6]  # Delaunay leaves flat tets between coplanar boundary points
+    return _oriented(grid, tets)
+
+
+def _oriented(points, tets):
+    corners = points[tets]
+    negative = np.linalg.det(corners[:, 1:] - corners[:, :1]) < 0
+    tets = tets.copy()
+    tets[negative, 2:] = tets[negative, 3:1:-1]
+    return TetMesh.compact(points, tets)
+
+
+def _sets(mesh):
+    regions = (mesh.points[mesh.tets].mean(axis=1)[:, 0] > 0.5).astype(np.int64)
+    return {
+        "corotated": CorotatedTets(mesh.points, mesh.tets, 1.0),
+        "nodal": NodalStrain(mesh.points, mesh.tets, 0.6, 2.0),
+        "nodal_regions": NodalStrain(mesh.points, mesh.tets, np.where(regions, 0.6, 1.0), np.where(regions, 2.0, 5.0),
+                                     regions=regions),
+        "volume_only": NodalStrain(mesh.points, mesh.tets, 0.0, 3.0),
+    }
+
+
+def _dense(element_set, blocks, n):
+    A = np.zeros((3 * n, 3 * n))
+    layout, stencil = element_set.block_map, element_set.stencil
+    for q in range(len(layout.row)):
+        rows, cols = stencil[:, layout.row[q]], stencil[:, layout.column[q]]
+        for e in range(len(stencil)):
+            A[3 * rows[e]:3 * rows[e] + 3, 3 * cols[e]:3 * cols[e] + 3] += layout.sign[q] * blocks[e, layout.block[q]]
+    return A
+
+
+# A deformation of 15% of the cell size at random: large strains, some tets near inversion.
+@pytest.mark.parametrize("name", ["corotated", "nodal", "nodal_regions", "volume_only"])
+def test_forces_are_the_energy_gradient_and_blocks_its_hessian(cube, name):
+    element_set = _sets(cube)[name]
+    rng = np.random.default_rng(RNG_SEED)
+    x = cube.points + 0.15 * rng.standard_normal(cube.points.shape)
+    h = 1e-6
+    gradient = np.zeros_like(x)
+    for i in range(len(x)):
+        for c in range(3):
+            step = np.zeros_like(x)
+            step[i, c] = h
+            gradient[i, c] = (element_set.energy(x + step) - element_set.energy(x - step)) / (2 * h)
+    forces = element_set.forces(x)
+    # Central differences at h = 1e-6 on O(1) energies: truncation h^2 ~ 1e-12, round-off 1e-16 / h ~ 1e-10.
+    assert np.abs(forces + gradient).max() <= 1e-8 * np.abs(forces).max()
+    u = rng.standard_normal(x.shape)
+    exact = _block_product(element_set, element_set.stiffness_blocks(x, clamp_compression=False), u)
+    differenced = -(element_set.forces(x + h * u) - element_set.forces(x - h * u)) / (2 * h)
+    assert np.abs(exact - differenced).max() <= 1e-8 * np.abs(differenced).max()
+
+
+@pytest.mark.parametrize("name", ["corotated", "nodal", "nodal_regions", "volume_only"])
+def test_projected_blocks_are_symmetric_positive_semidefinite(cube, name):
+    element_set = _sets(cube)[name]
+    x = cube.points + 0.2 * np.random.default_rng(RNG_SEED + 1).standard_normal(cube.points.shape)
+    A = _dense(element_set, element_set.stiffness_blocks(x), cube.node_count)
+    eigenvalues = np.linalg.eigvalsh(A)
+    # Exact zero eigenvalues (rigid modes, twist directions clamped to 0) come out at round-off: 1e-12 relative.
+    assert np.abs(A - A.T).max() <= 1e-12 * np.abs(A).max()
+    assert eigenvalues.min() >= -1e-12 * eigenvalues.max()
+
+
+@pytest.mark.parametrize("rung", MODELS)
+def test_rigid_motion_costs_no_energy_on_any_rung(cube, rung):
+    model = Model.from_mesh(cube, Material(E=1e6, nu=0.45, density=1000.0), model=rung)
+    x = cube.points @ _rotation(3).T + np.array([0.3, -2.0, 5.0])
+    # Energies are E * strain^2 * V ~ 1e6 at unit strain; a rotation leaves round-off of ~1e-16 in F.
+    assert model.energy(x) <= 1e-20 * 1e6
+    assert np.abs(model.forces(x)).max() <= 1e-8
+
+
+def test_an_inverted_tet_is_pushed_back_with_finite_forces(cube):
+    model = Model.from_mesh(cube, Material(E=1e6, nu=0.45, density=1000.0), model="smoothed")
+    x = cube.points.copy()
+    centre = np.argmin(np.abs(cube.points - 0.5).sum(axis=1))
+    x[centre, 2] += 0.9  # the middle node pushed through the top layer: tets below it stretch, above invert
+    volumes = np.linalg.det(np.transpose(x[cube.tets[:, 1:]] - x[cube.tets[:, :1]], (0, 2, 1)))
+    assert (volumes < 0).any()
+    forces = model.forces(x)
+    assert np.isfinite(forces).all() and np.isfinite(model.energy(x))
+    assert forces[centre, 2] < 0  # back down, towards the rest shape
+    # The energy falls along the force (it is a descent direction).
+    assert model.energy(x + 1e-9 * forces) < model.energy(x)
+
+
+@pytest.mark.parametrize("nu", [0.25, 0.3, 0.45, 0.49, 0.499])
+def test_smoothed_rung_passes_the_patch_test_on_an_unstructured_mesh(irregular, nu):
+    """A homogeneous strain: zero force on every interior node, energy exactly V (mu |eps|^2 + lambda/2 tr^2)."""
+    material = Material(E=2e6, nu=nu, density=1000.0)
+    model = Model.from_mesh(irregular, material, model="smoothed")
+    eps = 1e-6 * np.array([[1.0, 0.3, -0.2], [0.3, -0.5, 0.4], [-0.2, 0.4, 0.7]])
+    x = irregular.points + irregular.points @ eps.T
+    interior = np.setdiff1d(np.arange(irregular.node_count), irregular.boundary_nodes)
+    forces = model.forces(x)
+    scale = np.abs(forces[irregular.boundary_nodes]).max()
+    assert np.abs(forces[interior]).max() <= 1e-8 * scale  # round-off of the force sums: 1e-8 of a boundary force
+    mu, lam = material.shear_modulus, material.lame_lambda
+    linear = irregular.volume * (mu * (eps**2).sum() + 0.5 * lam * np.trace(eps) ** 2)
+    # The nonlinear energy differs from the linear one at O(strain^3): 1e-6 relative.
+    assert model.energy(x) == pytest.approx(linear, rel=1e-5)
+
+
+def test_springs_fail_the_patch_test(irregular):
+    """What the smoothed rung fixes: springs leave forces on interior nodes under a homogeneous strain."""
+    model = Model.from_mesh(irregular, Material(E=2e6, nu=0.3, density=1000.0))
+    x = irregular.points * np.array([1 + 1e-6, 1.0, 1.0])
+    interior = np.setdiff1d(np.arange(irregular.node_count), irregular.boundary_nodes)
+    forces = model.forces(x)
+    assert np.abs(forces[interior]).max() > 1e-2 * np.abs(forces[irregular.boundary_nodes]).max()
+
+
+@pytest.fixture(scope="module")
+def probe_meshes(irregular):
+    return {"structured 4^3": structured_box((4, 4, 4), (1.0, 1.0, 1.0)), "unstructured": irregular}
+
+
+@pytest.mark.parametrize("nu", [0.25, 0.3, 0.45, 0.49])
+def test_smoothed_rung_has_exact_e_and_nu_under_uniaxial_stress(probe_meshes, nu):
+    from validation.springs import effective_constants
+
+    material = Material(E=1e6, nu=nu, density=1000.0)
+    for mesh in probe_meshes.values():
+        found = effective_constants(mesh, Model.from_mesh(mesh, material, model="smoothed"))
+        # The issue's goal: E and nu within 1% on any mesh (measured: E 0.3-0.4% soft, nu within 0.002).
+        assert found["E_pa"] == pytest.approx(material.E, rel=0.01)
+        assert found["nu"] == pytest.approx(nu, rel=0.01)
+
+
+def test_volume_rung_moves_nu_towards_the_asked_value(probe_meshes):
+    """Springs keep their own nu (about 0.16); the volume term brings it near the asked one at high nu."""
+    from validation.springs import effective_constants
+
+    for mesh in probe_meshes.values():
+        springs_nu = effective_constants(mesh, Model.from_mesh(mesh, Material(E=1e6, nu=0.3, density=1000.0)))["nu"]
+        for nu in (0.3, 0.45, 0.49):
+            found = effective_constants(mesh, Model.from_mesh(mesh, Material(E=1e6, nu=nu, density=1000.0),
+                                                              model="springs+volume"))
+            assert abs(found["nu"] - nu) < abs(springs_nu - nu)
+        # At 0.49 within the goal's 0.03 (measured 0.4786-0.4805; at 0.3 it stays 0.07 low, see the README).
+        assert found["nu"] == pytest.approx(0.49, abs=0.03)
+        # The volume change per axial strain (exact 1 - 2 nu = 0.02) within 1.5x (measured 1.25-1.42x;
+        # springs alone: 32-35x).
+        assert found["volume_strain_per_axial_strain"] < 1.5 * 0.02
+
+
+def test_volume_rung_refuses_a_poisson_ratio_below_the_springs(irregular):
+    mu_s, bulk_s = network_moduli(irregular, Model.from_mesh(irregular, Material(E=1.0, nu=0.3, density=1.0)).spring_elements)
+    own = network_poisson_ratio(mu_s, bulk_s)
+    assert 0.1 < own < 0.3  # the Cauchy limit: about 1/4 for a tet network (REFERENCE.md section 2)
+    with pytest.raises(ValueError, match=r"nu = 0\.05.*model='smoothed'"):
+        Model.from_mesh(irregular, Material(E=1e6, nu=0.05, density=1000.0), model="springs+volume")
+
+
+def test_model_names_and_parameters_are_checked(cube):
+    material = Material(E=1e6, nu=0.3, density=1000.0)
+    with pytest.raises(ValueError, match="unknown model 'fem'; known: springs, springs\\+volume, smoothed"):
+        Model.from_mesh(cube, material, model="fem")
+    with pytest.raises(ValueError, match="alpha = 1.5 is not in"):
+        Model.from_mesh(cube, material, model="smoothed", alpha=1.5)
+    with pytest.raises(ValueError, match="alpha= is the smoothed rung's"):
+        Model.from_mesh(cube, material, model="springs", alpha=0.5)
+    with pytest.raises(ValueError, match="rule=, stiffness= and damping= do not apply"):
+        Model.from_mesh(cube, material, model="smoothed", rule="lloyd")
+
+
+def test_materials_per_region_on_every_rung(cube):
+    """Two regions, the soft one twice as soft: the mass and stiffness follow each tet's material."""
+    soft, hard = Material(E=1e6, nu=0.3, density=1000.0), Material(E=2e6, nu=0.3, density=3000.0)
+    regions = (cube.points[cube.tets].mean(axis=1)[:, 0] > 0.5).astype(np.int64)
+    for rung in MODELS:
+        tagged = Model.from_mesh(cube, soft, model=rung, regions=regions, materials={1: hard})
+        assert tagged.total_mass == pytest.approx(0.5 * 1000.0 + 0.5 * 3000.0)
+        # Stretching along y is parallel to the interface: the stiffnesses add, 1.5x the soft body's.
+        x = cube.points * np.array([1.0, 1.0 + 1e-6, 1.0])
+        uniform = Model.from_mesh(cube, soft, model=rung)
+        assert tagged.energy(x) / uniform.energy(x) == pytest.approx(1.5, rel=0.05 if rung != "smoothed" else 1e-4)
+    with pytest.raises(ValueError, match="no tet has that tag"):
+        Model.from_mesh(cube, soft, regions=regions, materials={7: hard})
+
+
+def test_smoothed_frequencies_match_p2_without_spurious_modes():
+    """The first ten free-vibration frequencies of a clamped beam against P2 on the same mesh."""
+    from validation.cases import cantilever_modes
+    from validation.fem import solve_fem_modes
+    from validation.springs import held_nodes, spring_frequencies
+
+    case = cantilever_modes(per_height=2, count=10)
+    reference = solve_fem_modes(case.mesh, case.material_tuple, clamp=list(case.clamps), count=10)
+    model = Model.from_mesh(case.mesh, case.material, model="smoothed")
+    frequencies, _ = spring_frequencies(model, held_nodes(case), count=10)
+    ratio = frequencies / reference.frequencies
+    print("smoothed / P2 frequencies:", np.round(ratio, 4))
+    # No spurious low modes: every frequency within the band the discretisation error allows;
+    # measured 0.99-1.06 on this 20 x 2 x 2 beam (bending slightly stiff, like the static deflection).
+    assert ratio.min() > 0.9 and ratio.max() < 1.15
+
+
+def test_symplectic_euler_conserves_energy_below_the_critical_step(cube):
+    from volspring.integrators import make_integrator
+    from volspring.stability import critical_step, omega_max_estimate
+
+    model = Model.from_mesh(cube, Material(E=1e5, nu=0.45, density=1000.0), model="smoothed")
+    scene = Scene(model)
+    dt = 0.5 * critical_step("symplectic_euler", omega_max_estimate(scene))
+    rng = np.random.default_rng(RNG_SEED)
+    state = scene.initial_state(v=0.05 * rng.standard_normal(cube.points.shape))
+    integrator = make_integrator("symplectic_euler")
+    energies = []
+    for _ in range(2000):
+        state = integrator.step(scene, state, dt)
+        energies.append(model.energy(state.x) + 0.5 * (model.masses[:, None] * state.v**2).sum())
+    energies = np.array(energies)
+    # Symplectic Euler keeps a shadow energy: the true energy oscillates by O(h omega) without drift.
+    assert energies.std() / energies.mean() < 0.05
+    assert abs(energies[-200:].mean() / energies[:200].mean() - 1) < 0.01
