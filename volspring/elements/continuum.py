@@ -64,11 +64,11 @@ def _damping_time(value) -> float:
     return b
 
 
-def _twist_product(twists, coefficients, vectors_a, vectors_b):
-    """(m, 3, 3) -- sum_r c_r (q_r a)(q_r b)^T for (m, 3) vectors a, b (batched)."""
-    ua = np.einsum("mrij,mj->mri", twists, vectors_a)
-    ub = np.einsum("mrij,mj->mri", twists, vectors_b)
-    return np.einsum("mr,mri,mrj->mij", coefficients, ua, ub)
+def _twist_vectors(twists, coefficients, vectors):
+    """(m, 3, 3), (m, 3, 3) -- rows q_r a and c_r q_r a of each (m, 3) vector a: the twist part of a block
+    (a, b) is ``scaled[a]^T @ plain[b]`` = sum_r c_r (q_r a)(q_r b)^T."""
+    plain = np.matmul(twists, vectors[:, None, :, None])[..., 0]  # (m, r, i)
+    return plain, coefficients[:, :, None] * plain
 
 
 def _hessian_times(twists, coefficients, dF):
@@ -137,12 +137,13 @@ class CorotatedTets(ElementSet):
     def _blocks(self, twists, coefficients):
         g = self.kinematics.gradients
         T = len(g)
-        ga = np.repeat(g, 4, axis=1).reshape(-1, 3)  # corner a of block (a, b)
-        gb = np.tile(g, (1, 4, 1)).reshape(-1, 3)
-        q = np.repeat(twists, 16, axis=0)
-        c = np.repeat(coefficients, 16, axis=0)
-        blocks = np.einsum("mi,mi->m", ga, gb)[:, None, None] * np.eye(3) - _twist_product(q, c, ga, gb)
-        return (2.0 * np.repeat(self._weights(), 16))[:, None, None] * blocks.reshape(T * 16, 3, 3)
+        plain, scaled = _twist_vectors(np.repeat(twists, 4, axis=0), np.repeat(coefficients, 4, axis=0),
+                                       g.reshape(-1, 3))
+        plain, scaled = plain.reshape(T, 4, 3, 3), scaled.reshape(T, 4, 3, 3)
+        twist = np.matmul(np.swapaxes(scaled, -1, -2)[:, :, None], plain[:, None, :])  # (T, a, b, 3, 3)
+        dots = np.matmul(g, np.swapaxes(g, 1, 2))  # (T, a, b)
+        blocks = dots[..., None, None] * np.eye(3) - twist
+        return (2.0 * self._weights())[:, None, None, None, None] * blocks
 
     def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
         _, _, twists, coefficients = corotational(self.kinematics.deformation(np.asarray(x, dtype=np.float64)),
@@ -246,10 +247,13 @@ class NodalStrain(ElementSet):
         return self.domains.ring_domain[self.domains.pairs[0]]
 
     @cached_property
-    def _pair_dots(self):
+    def _identity_blocks(self):
+        """(p, 3, 3) -- the shear blocks' constant part 2 mu_d V_d (gbar_a . gbar_b) I of every pair."""
         first, second = self.domains.pairs
         gradient = self.domains.ring_gradient
-        return np.einsum("pi,pi->p", gradient[first], gradient[second])
+        weights = 2.0 * (self.shear * self.domains.volumes)[self._pair_domain]
+        dots = weights * np.einsum("pi,pi->p", gradient[first], gradient[second])
+        return dots[:, None, None] * np.eye(3)
 
     # ------------------------------------------------------------------ kinematics
     def _state(self, x, project):
@@ -316,16 +320,18 @@ class NodalStrain(ElementSet):
 
     def _blocks(self, state, exact):
         first, second = self.domains.pairs
-        domain = self._pair_domain
         V = self.domains.volumes
         w = self._ring_volume_gradients(state)
-        blocks = (self.bulk / V)[domain][:, None, None] * (w[first][:, :, None] * w[second][:, None, :])
+        w = w * np.sqrt(self.bulk / V)[self.domains.ring_domain][:, None]
+        blocks = w[first][:, :, None] * w[second][:, None, :]
         if "P" in state:
-            gradient = self.domains.ring_gradient
-            shear = 2.0 * (self.shear * V)[domain]
-            twist = _twist_product(state["twists"][domain], state["coefficients"][domain], gradient[first],
-                                   gradient[second])
-            blocks += shear[:, None, None] * (self._pair_dots[:, None, None] * np.eye(3) - twist)
+            # Per ring entry, the twist rows weighted by sqrt(2 mu_d V_d); the constant part is cached.
+            entry_domain = self.domains.ring_domain
+            root = np.sqrt(2.0 * self.shear * V)[entry_domain][:, None, None]
+            plain, scaled = _twist_vectors(state["twists"][entry_domain], state["coefficients"][entry_domain],
+                                           self.domains.ring_gradient)
+            blocks -= np.matmul(np.swapaxes(root * scaled, 1, 2)[first], (root * plain)[second])
+            blocks += self._identity_blocks
         if exact:
             blocks += self._volume_curvature(state)
         return blocks[:, None]
