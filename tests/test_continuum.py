@@ -258,3 +258,28 @@ def test_symplectic_euler_conserves_energy_below_the_critical_step(cube):
     # Symplectic Euler keeps a shadow energy: the true energy oscillates by O(h omega) without drift.
     assert energies.std() / energies.mean() < 0.05
     assert abs(energies[-200:].mean() / energies[:200].mean() - 1) < 0.01
+
+
+def test_damping_ratio_damps_the_highest_mode_by_zeta(cube):
+    """Rayleigh stiffness damping b = 2 zeta / omega_max: the highest mode decays at zeta omega_max = 2 zeta / b."""
+    from volspring.integrators import make_integrator
+    from volspring.stability import omega_max_estimate
+
+    material = Material(E=1e5, nu=0.45, density=1000.0)
+    damped = Model.from_mesh(cube, material, model="smoothed", damping_ratio=0.1)
+    omega = omega_max_estimate(Model.from_mesh(cube, material, model="smoothed"))
+    for element_set in damped.elements:
+        assert element_set.stiffness_damping == pytest.approx(2 * 0.1 / omega, rel=1e-12)
+    v0 = 0.05 * np.random.default_rng(RNG_SEED).standard_normal(cube.points.shape)
+
+    def energy_after(model, steps=50):
+        scene = Scene(model)
+        state = scene.initial_state(v=v0)
+        integrator = make_integrator("symplectic_euler")  # conserves energy undamped: the loss is the damping's
+        for _ in range(steps):
+            state = integrator.step(scene, state, 0.2 / omega)
+        return model.energy(state.x) + 0.5 * (model.masses[:, None] * state.v**2).sum()
+
+    undamped = energy_after(Model.from_mesh(cube, material, model="smoothed"))
+    # Measured 0.78 after 50 steps; without damping the ratio is 1 up to the shadow energy's O(h omega) wobble.
+    assert energy_after(damped) < 0.9 * undamped
