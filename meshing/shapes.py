@@ -1,7 +1,9 @@
 """Built-in closed shapes with exact volumes: triangle surfaces for any backend, OCC solids for gmsh.
 
-Every shape is centred on the origin; lengths are in metres. ``parse_shape("box:1,0.1,0.1")``
-reads the command-line form ``NAME:D1,D2,...``.
+Every shape is centred on the origin (the centre of its bounding box); lengths are in metres.
+``parse_shape("box:1,0.1,0.1")`` reads the command-line form ``NAME:D1,D2,...``. The shapes: ``box``,
+``sphere``, ``cylinder``, ``torus``, ``ellipsoid``, ``capsule`` (a cylinder with hemispherical ends)
+and ``l_bracket`` (an L-shaped polygon extruded along z).
 """
 
 from __future__ import annotations
@@ -14,7 +16,8 @@ import numpy as np
 
 from meshing.geometry import triangle_area_normals
 
-__all__ = ["SHAPE_NAMES", "Shape", "box", "cylinder", "ellipsoid", "parse_shape", "sphere", "torus"]
+__all__ = ["SHAPE_NAMES", "Shape", "box", "capsule", "cylinder", "ellipsoid", "l_bracket", "l_bracket_polygon",
+           "parse_shape", "sphere", "torus"]
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,11 @@ class Shape:
                 f"torus: minor radius r = {dimensions[1]} must be < major radius R = {dimensions[0]} "
                 "(otherwise the torus intersects itself)"
             )
+        if self.name == "l_bracket" and not dimensions[2] < min(dimensions[0], dimensions[1]):
+            raise ValueError(
+                f"l_bracket: thickness = {dimensions[2]} must be < both legs lx = {dimensions[0]} and "
+                f"ly = {dimensions[1]} (otherwise it is a box, not an L)"
+            )
         object.__setattr__(self, "dimensions", dimensions)
 
     @property
@@ -93,6 +101,10 @@ class Shape:
             half = (d[0] + d[1], d[0] + d[1], d[1])
         elif self.name == "ellipsoid":
             half = d
+        elif self.name == "capsule":
+            half = (d[0], d[0], d[0] + d[1] / 2)
+        elif self.name == "l_bracket":
+            half = (d[0] / 2, d[1] / 2, d[3] / 2)
         else:
             half = (d[0],) * 3
         return np.array([[-h for h in half], list(half)], dtype=np.float64)
@@ -228,6 +240,86 @@ def _torus_surface(d, size):
     )
 
 
+def _capsule_surface(d, size):
+    import trimesh
+
+    radius, length = d
+    # The profile in the (radius, z) half-plane: a quarter circle, the straight side, a quarter circle;
+    # revolved about z. Its end points lie on the axis (radius exactly 0), where revolve closes the poles.
+    quarter = max(2, math.ceil(math.pi / 2 * radius / size))
+    theta = np.linspace(-math.pi / 2, 0.0, quarter + 1)
+    lower = np.stack([radius * np.cos(theta), radius * np.sin(theta) - length / 2], axis=1)
+    lower[0, 0] = 0.0
+    z = np.linspace(-length / 2, length / 2, max(1, math.ceil(length / size)) + 1)[1:-1]
+    side = np.stack([np.full(len(z), radius), z], axis=1)
+    profile = np.concatenate([lower, side, lower[::-1] * [1.0, -1.0]])
+    return trimesh.creation.revolve(profile, sections=max(8, math.ceil(2 * math.pi * radius / size)))
+
+
+def _l_bracket_surface(d, size):
+    lx, ly, thickness, depth = d
+    # The L is the union of three rectangles of the grid x in {x0, x1, x2}, y in {y0, y1, y2} (the
+    # corner square and one rectangle per leg): every face of the extrusion is a product of these
+    # intervals, each cut into the same number of divisions wherever it appears, so the welded patches
+    # share their border vertices (a conforming surface without a 2D mesher).
+    xs, ys, zs = (-lx / 2, -lx / 2 + thickness, lx / 2), (-ly / 2, -ly / 2 + thickness, ly / 2), (-depth / 2, depth / 2)
+
+    def cut(low, high):
+        return np.linspace(low, high, max(1, math.ceil((high - low) / size)) + 1)
+
+    x = [cut(xs[0], xs[1]), cut(xs[1], xs[2])]
+    y = [cut(ys[0], ys[1]), cut(ys[1], ys[2])]
+    z = cut(*zs)
+    cells = ((0, 0), (1, 0), (0, 1))  # (x interval, y interval) of the corner and the two legs
+    parts = []
+    for i, j in cells:  # the caps z = -depth/2 and z = +depth/2
+        for level, outward in ((zs[0], -1.0), (zs[1], 1.0)):
+            parts.append(_flat_patch(x[i], y[j], (0, 1, 2), level, (0.0, 0.0, outward)))
+    walls = [  # (axis across the wall, its coordinate, outward sign, the interval along the wall)
+        (1, ys[0], -1.0, x[0]), (1, ys[0], -1.0, x[1]),  # the outer side of the x leg, y = y0
+        (0, xs[2], 1.0, y[0]),                            # the end of the x leg, x = x2
+        (1, ys[1], 1.0, x[1]),                            # the inner side of the x leg, y = y1
+        (0, xs[1], 1.0, y[1]),                            # the inner side of the y leg, x = x1
+        (1, ys[2], 1.0, x[0]),                            # the end of the y leg, y = y2
+        (0, xs[0], -1.0, y[0]), (0, xs[0], -1.0, y[1]),  # the outer side of the y leg, x = x0
+    ]
+    for axis, level, outward, along in walls:
+        other = 1 - axis  # the in-plane axis along the wall
+        normal = [0.0, 0.0, 0.0]
+        normal[axis] = outward
+        parts.append(_flat_patch(along, z, (other, 2, axis), level, normal))
+    return _oriented_patches(parts)
+
+
+def _flat_patch(u, v, axes, level, normal):
+    """A grid of triangles on a plane: coordinates ``u`` along ``axes[0]``, ``v`` along ``axes[1]``, ``level``
+    on ``axes[2]``; (vertices, faces, outward normal)."""
+    uv, faces = _grid(len(u) - 1, len(v) - 1)
+    vertices = np.empty((len(uv), 3))
+    vertices[:, axes[0]] = np.interp(uv[:, 0], np.linspace(0, 1, len(u)), u)
+    vertices[:, axes[1]] = np.interp(uv[:, 1], np.linspace(0, 1, len(v)), v)
+    vertices[:, axes[2]] = level
+    return vertices, faces, np.asarray(normal, dtype=np.float64)
+
+
+def _oriented_patches(parts):
+    """One surface from flat (vertices, faces, outward normal) patches whose shared borders coincide."""
+    import trimesh
+
+    oriented = []
+    for vertices, faces, normal in parts:
+        inward = triangle_area_normals(vertices, faces) @ normal < 0
+        faces = faces.copy()
+        faces[inward] = faces[inward][:, ::-1]
+        oriented.append((vertices, faces))
+    vertices = np.concatenate([v for v, _ in oriented])
+    offsets = np.cumsum([0] + [len(v) for v, _ in oriented[:-1]])
+    faces = np.concatenate([f + offset for (_, f), offset in zip(oriented, offsets)])
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    mesh.merge_vertices()
+    return mesh
+
+
 # ---------------------------------------------------------------------- OCC solids
 def _box_occ(occ, d):
     return occ.addBox(-d[0] / 2, -d[1] / 2, -d[2] / 2, d[0], d[1], d[2])
@@ -251,6 +343,35 @@ def _torus_occ(occ, d):
     return occ.addTorus(0.0, 0.0, 0.0, d[0], d[1])
 
 
+def _capsule_occ(occ, d):
+    radius, length = d
+    cylinder = occ.addCylinder(0.0, 0.0, -length / 2, 0.0, 0.0, length, radius)
+    ends = [occ.addSphere(0.0, 0.0, z, radius) for z in (-length / 2, length / 2)]
+    fused, _ = occ.fuse([(3, cylinder)], [(3, tag) for tag in ends])
+    return _single_volume(fused, "capsule")
+
+
+def _l_bracket_occ(occ, d):
+    lx, ly, thickness, depth = d
+    return _extruded_polygon_occ(occ, l_bracket_polygon(lx, ly, thickness), -depth / 2, depth)
+
+
+def _extruded_polygon_occ(occ, polygon, z0, depth):
+    """A simple polygon (k, 2) in the plane z = ``z0``, extruded by ``depth`` along z; returns the volume tag."""
+    points = [occ.addPoint(float(x), float(y), z0) for x, y in polygon]
+    lines = [occ.addLine(points[i], points[(i + 1) % len(points)]) for i in range(len(points))]
+    face = occ.addPlaneSurface([occ.addCurveLoop(lines)])
+    extruded = occ.extrude([(2, face)], 0.0, 0.0, depth)
+    return _single_volume([dim_tag for dim_tag in extruded if dim_tag[0] == 3], "extruded polygon")
+
+
+def _single_volume(dim_tags, what):
+    volumes = [tag for dim, tag in dim_tags if dim == 3]
+    if len(volumes) != 1:
+        raise ValueError(f"gmsh made {len(volumes)} volumes of the {what}, expected one")
+    return volumes[0]
+
+
 _KINDS = {
     "box": _ShapeKind(("lx", "ly", "lz"), lambda a, b, c: a * b * c, _box_surface, _box_occ),
     "sphere": _ShapeKind(("r",), lambda r: 4 / 3 * math.pi * r**3, _sphere_surface, _sphere_occ),
@@ -258,6 +379,10 @@ _KINDS = {
     "torus": _ShapeKind(("R", "r"), lambda R, r: 2 * math.pi**2 * R * r**2, _torus_surface, _torus_occ),
     "ellipsoid": _ShapeKind(("a", "b", "c"), lambda a, b, c: 4 / 3 * math.pi * a * b * c,
                             _ellipsoid_surface, _ellipsoid_occ),
+    "capsule": _ShapeKind(("r", "length"), lambda r, h: math.pi * r**2 * (h + 4 / 3 * r),
+                          _capsule_surface, _capsule_occ),
+    "l_bracket": _ShapeKind(("lx", "ly", "thickness", "depth"), lambda a, b, t, c: t * (a + b - t) * c,
+                            _l_bracket_surface, _l_bracket_occ),
 }
 
 #: Names of the built-in shapes.
@@ -289,12 +414,52 @@ def ellipsoid(a: float, b: float, c: float) -> Shape:
     return Shape("ellipsoid", (a, b, c))
 
 
+def capsule(r: float, length: float) -> Shape:
+    """A capsule along z: a cylinder of radius ``r`` [m] and ``length`` [m] closed by two hemispheres of
+    radius ``r``; it spans ``length + 2 r`` along z (``length`` is the distance between the hemispheres'
+    centres, as trimesh's ``creation.capsule`` ``height``)."""
+    return Shape("capsule", (r, length))
+
+
+def l_bracket(lx: float, ly: float, thickness: float, depth: float) -> Shape:
+    """An L-shaped bracket: the polygon :func:`l_bracket_polygon` in the xy plane extruded by ``depth`` [m]
+    along z.
+
+    Its legs are ``lx`` [m] along x and ``ly`` [m] along y, both ``thickness`` [m] thick (< lx, ly), joined
+    at the corner (-lx/2, -ly/2) of the bounding box; the x leg's end is the face x = lx/2, the y leg's
+    the face y = ly/2.
+
+    Examples
+    --------
+    >>> shape = l_bracket(0.4, 0.3, 0.05, 0.1)
+    >>> round(shape.volume, 12)   # thickness (lx + ly - thickness) depth
+    0.00325
+    """
+    return Shape("l_bracket", (lx, ly, thickness, depth))
+
+
+def l_bracket_polygon(lx: float, ly: float, thickness: float) -> np.ndarray:
+    """(6, 2) float -- the L's outline [m], counter-clockwise from the outer corner (-lx/2, -ly/2).
+
+    Parameters
+    ----------
+    lx, ly : float -- the legs' lengths along x and y [m]
+    thickness : float -- both legs' thickness [m], < lx and ly
+    """
+    x0, y0 = -lx / 2, -ly / 2
+    return np.array([[x0, y0], [lx / 2, y0], [lx / 2, y0 + thickness], [x0 + thickness, y0 + thickness],
+                     [x0 + thickness, ly / 2], [x0, ly / 2]], dtype=np.float64)
+
+
 def parse_shape(spec: str) -> Shape:
     """Read a built-in shape from its command-line form ``NAME:D1,D2,...``.
 
     Parameters
     ----------
-    spec : str -- e.g. ``"box:1,0.1,0.1"``, ``"sphere:0.5"``, ``"cylinder:0.2,1"``, ``"torus:0.5,0.15"``
+    spec : str -- ``NAME:D1,D2,...`` with NAME one of :data:`SHAPE_NAMES` and its dimensions [m] in order:
+        ``box:lx,ly,lz``, ``sphere:r``, ``cylinder:r,length``, ``torus:R,r``, ``ellipsoid:a,b,c``,
+        ``capsule:r,length`` (see :func:`capsule`), ``l_bracket:lx,ly,thickness,depth`` (see
+        :func:`l_bracket`); e.g. ``"box:1,0.1,0.1"``, ``"torus:0.5,0.15"``, ``"capsule:0.1,0.4"``
 
     Raises
     ------
@@ -306,6 +471,8 @@ def parse_shape(spec: str) -> Shape:
     --------
     >>> parse_shape("torus:0.5,0.15")
     Shape(name='torus', dimensions=(0.5, 0.15))
+    >>> parse_shape("l_bracket:0.4,0.3,0.05,0.1").parameters
+    ('lx', 'ly', 'thickness', 'depth')
     """
     name, colon, rest = str(spec).strip().partition(":")
     name = name.strip().lower()

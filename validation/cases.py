@@ -27,6 +27,9 @@ Built-in cases (names in :data:`CASE_NAMES`), all in SI units:
 ``cantilever_modes``
     The gravity cantilever's lowest vibration frequencies; Euler-Bernoulli gives 8.85 Hz for the
     first bending mode (a square section has a degenerate pair, y and z).
+``torus_gravity``, ``capsule_gravity``, ``l_bracket_gravity``, ``bunny_gravity``
+    Held-out shapes under their own weight on coarse stored meshes where P1 is 20% or more off P2
+    (:mod:`validation.heldout`; ``build_case`` takes their ``nu``, default 0.3).
 ``own_mesh``
     Any :class:`meshing.TetMesh` with a clamp region and gravity and/or a traction
     (:func:`own_mesh_case`, used by ``volspring-validate --mesh FILE --clamp REGION``; its regions
@@ -52,6 +55,7 @@ from meshing import structured_box
 from validation import analytic
 from validation._case import BeamGeometry, Case
 from validation._own_mesh import check_held, own_mesh_case, parse_region
+from validation.heldout import HELDOUT_CASE_NAMES, build_heldout_case
 from validation.boundary import Clamp, Traction
 from volspring.material import Material
 from volspring.regions import Box
@@ -75,7 +79,7 @@ __all__ = [
 ]
 
 CASE_NAMES = ("cantilever_gravity", "cantilever_end_load", "hanging_bar", "uniaxial_compression",
-              "cantilever_modes", "own_mesh")
+              "cantilever_modes") + HELDOUT_CASE_NAMES + ("own_mesh",)
 
 #: The beam of the cantilever cases: length, width, height [m], material and loads.
 BEAM = {"length_m": 1.0, "width_m": 0.1, "height_m": 0.1, "E_pa": 3e8, "nu": 0.3, "density_kg_per_m3": 1000.0,
@@ -219,7 +223,8 @@ def build_case(name: str, *, quick: bool = False, nu: float | None = None) -> Ca
     """A built-in case by name at the default resolution (``quick``: the coarse one).
 
     Default: 2 cells across the beam (20 x 2 x 2 cells, 189 nodes), a 2 x 2 x 20 bar, a 4^3 cube.
-    Quick: 1 cell across (10 x 1 x 1, 44 nodes), 1 x 1 x 10, 3^3.
+    Quick: 1 cell across (10 x 1 x 1, 44 nodes), 1 x 1 x 10, 3^3. The held-out shapes have one stored
+    mesh each (quick or not) and take ``nu`` (default 0.3), as the cube does.
     """
     level = 1 if quick else 2
     if name == "cantilever_gravity":
@@ -232,6 +237,8 @@ def build_case(name: str, *, quick: bool = False, nu: float | None = None) -> Ca
         return hanging_bar(per_width=level)
     if name == "uniaxial_compression":
         return uniaxial_compression(cells=3 if quick else 4, nu=0.3 if nu is None else nu)
+    if name in HELDOUT_CASE_NAMES:
+        return build_heldout_case(name, nu=nu)
     if name == "own_mesh":
         raise ValueError("the own_mesh case needs a mesh: use own_mesh_case (volspring-validate --mesh FILE)")
     raise ValueError(f"unknown case {name!r}; known: {', '.join(CASE_NAMES)}")
