@@ -36,7 +36,9 @@ from meshing.units import length_factor, scaled_points, warn_if_large
 __all__ = [
     "PREFERRED_FORMATS",
     "mesh_file_format",
+    "REGION_TAG_NAMES",
     "read_tet_mesh",
+    "read_tet_regions",
     "tet_mesh_from_meshio",
     "tet_mesh_to_meshio",
     "write_tet_mesh",
@@ -46,6 +48,9 @@ logger = logging.getLogger(__name__)
 
 #: meshio lists several formats for some extensions, and not the one users mean first (.msh -> ansys).
 PREFERRED_FORMATS = {".msh": "gmsh"}
+#: The cell data that tags tets by region, in the order looked for: gmsh's physical groups, Medit's
+#: references, and a plain ``region`` array (what :func:`write_tet_mesh` writes with ``cell_data``).
+REGION_TAG_NAMES = ("gmsh:physical", "medit:ref", "region")
 
 
 def tet_mesh_to_meshio(mesh: TetMesh, *, point_data=None, cell_data=None):
@@ -144,9 +149,18 @@ def read_tet_mesh(path, *, units: str = "m", scale=None, stacklevel: int = 3) ->
         When read in metres with no explicit ``scale`` and more than 10 m across: probably
         millimetres (:func:`meshing.units.warn_if_large`).
     """
+    factor = length_factor(units, scale)
+    mesh = _read_meshio(path)
+    mesh.points = scaled_points(mesh.points, factor, name=os.fspath(path))
+    result = tet_mesh_from_meshio(mesh)
+    warn_if_large(result.points, units=units, scale=scale, name=os.fspath(path), stacklevel=stacklevel)
+    return result
+
+
+def _read_meshio(path):
+    """The ``meshio.Mesh`` of a file, with one ValueError for every way the read fails."""
     import meshio
 
-    factor = length_factor(units, scale)
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"no mesh file at {path}")
@@ -156,14 +170,70 @@ def read_tet_mesh(path, *, units: str = "m", scale=None, stacklevel: int = 3) ->
     try:
         chatter = io.StringIO()
         with contextlib.redirect_stdout(chatter), contextlib.redirect_stderr(chatter):
-            mesh = meshio.read(path, file_format=file_format)
+            return meshio.read(path, file_format=file_format)
     except (SystemExit, Exception) as error:
         detail = " ".join(chatter.getvalue().split()) or f"{type(error).__name__}: {error}"
         raise ValueError(f"cannot read {path} as a {file_format} mesh ({detail})") from None
-    mesh.points = scaled_points(mesh.points, factor, name=os.fspath(path))
-    result = tet_mesh_from_meshio(mesh)
-    warn_if_large(result.points, units=units, scale=scale, name=os.fspath(path), stacklevel=stacklevel)
-    return result
+
+
+def read_tet_regions(path, *, name=None):
+    """The region tag of every tet of a mesh file, in the order of :func:`read_tet_mesh`'s tets, or None.
+
+    The tags are the file's cell data on its ``tetra`` blocks: gmsh physical groups
+    (``gmsh:physical``), Medit references (``medit:ref``) or a ``region`` array, the first of
+    :data:`REGION_TAG_NAMES` present (or ``name``). :func:`read_tet_mesh` keeps the tets in the
+    file's order (the ``tetra`` blocks one after the other; turning an inverted mesh the right way
+    round renumbers corners within a tet, never the tets), so tag ``t`` belongs to tet ``t`` of the
+    mesh read from the same file.
+
+    Parameters
+    ----------
+    path : path-like
+        A mesh file (any volume format meshio reads).
+    name : str, optional
+        The cell data to read; default the first of :data:`REGION_TAG_NAMES` that the file has.
+
+    Returns
+    -------
+    (T,) int64 or None
+        None when the file has no such cell data (or ``name`` is not there).
+
+    Raises
+    ------
+    ValueError
+        For a file that cannot be read, no tets, tags that are not integers or are negative.
+    FileNotFoundError
+        When there is no file at ``path``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> from meshing import structured_box
+    >>> box = structured_box((2, 1, 1), (2.0, 1.0, 1.0))
+    >>> tags = (box.points[box.tets].mean(axis=1)[:, 0] > 1.0).astype(int) + 1   # 1 left, 2 right
+    >>> path = write_tet_mesh(box, Path(tempfile.mkdtemp()) / "two.mesh", cell_data={"medit:ref": tags})
+    >>> read_tet_regions(path).tolist() == tags.tolist()
+    True
+    """
+    mesh = _read_meshio(path)
+    blocks = [index for index, block in enumerate(mesh.cells) if block.type == "tetra"]
+    if not blocks:
+        found = sorted({block.type for block in mesh.cells}) or ["no cells"]
+        raise ValueError(f"{path} has no tetra cells (found {', '.join(found)})")
+    names = (name,) if name is not None else REGION_TAG_NAMES
+    key = next((candidate for candidate in names if candidate in mesh.cell_data), None)
+    if key is None:
+        return None
+    tags = np.concatenate([np.asarray(mesh.cell_data[key][index]).reshape(-1) for index in blocks])
+    if tags.dtype.kind == "f" and np.all(tags == np.round(tags)):
+        tags = tags.astype(np.int64)  # some formats store integer tags as floats
+    if tags.dtype.kind not in "iu":
+        raise ValueError(f"{path}: its region tags {key!r} have dtype {tags.dtype}; expected integers")
+    tags = tags.astype(np.int64)
+    if len(tags) and tags.min() < 0:
+        raise ValueError(f"{path}: its region tags {key!r} hold {int(tags.min())}; expected tags >= 0")
+    return tags
 
 
 def write_tet_mesh(mesh: TetMesh, path, *, point_data=None, cell_data=None, file_format=None) -> Path:

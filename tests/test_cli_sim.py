@@ -150,7 +150,8 @@ def test_resume_refuses_a_checkpoint_of_another_mesh(tmp_path, capsys, beam_file
 
 def test_help_exits_zero(capsys):
     assert main(["--help"]) == 0
-    assert "--pin" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "--pin" in out and "--model {springs,springs+volume,smoothed}" in out and "--region-material" in out
 
 
 def test_shape_input_is_meshed(tmp_path, capsys):
@@ -193,10 +194,14 @@ def test_render_surface_is_anchored_in_file_order(tmp_path, capsys, beam_file):
 def test_nu_given_to_a_pure_spring_rule_says_it_is_ignored(tmp_path, capsys, beam_file):
     status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--nu", "0.3", "--quiet")
     assert status == 0
-    assert err == ("volspring-sim: warning: --nu 0.3 is ignored by --rule van_gelder: pure springs have one effective "
-                   "Poisson ratio whatever nu is asked (the Cauchy limit; volspring-validate cauchy measures it)\n")
-    # Nobody asked for a nu: no warning.
+    assert err == ("volspring-sim: warning: --nu 0.3 is ignored by --model springs (--rule van_gelder): pure springs "
+                   "have one effective Poisson ratio whatever nu is asked (the Cauchy limit; volspring-validate cauchy "
+                   "measures it); --model smoothed honours nu (springs+volume too, for nu from about 0.25)\n")
+    # Nobody asked for a nu: no warning; and the rungs that honour nu say nothing either.
     assert run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--quiet") == (0, "", "")
+    for rung in ("springs+volume", "smoothed"):
+        assert run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--nu", "0.3", "--model", rung,
+                   "--quiet") == (0, "", "")
 
 
 def test_the_summary_reports_inverted_tets(tmp_path, capsys, beam_file):

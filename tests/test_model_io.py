@@ -97,7 +97,7 @@ class _Anchors(ElementSet):
 def test_an_element_set_of_unknown_type_is_refused_not_dropped(tmp_path):
     model = shelled_model().with_elements(_Anchors([0, 1]))
     with pytest.raises(TypeError, match=r"cannot save model.elements\[1\], a _Anchors: a model file holds element "
-                                        r"sets of the types Springs only"):
+                                        r"sets of the types Springs, CorotatedTets, NodalStrain only"):
         save_model(tmp_path / "model.vsmodel.npz", model)
     assert list(tmp_path.iterdir()) == []
 
@@ -117,7 +117,7 @@ def test_a_newer_version_is_refused_naming_file_and_versions(tmp_path):
     (shelled_model, {"topology/tets": None}, r"model.vsmodel.npz is damaged .*'topology/tets' is missing"),
     (shelled_model, {"element_types": np.asarray(["volume"])},
      r"model.vsmodel.npz holds an element set of type 'volume' \(elements\[0\]\), which this volspring cannot "
-     r"read \(known: springs\)"),
+     r"read \(known: springs, corotated_tets, nodal_strain\)"),
     (arrays_model, {"masses": -np.ones(3)}, r"model.vsmodel.npz holds an invalid model: masses\[0\] = -1.0"),
     (arrays_model, {"format": np.asarray("volspring.spring_topology")},
      r"model.vsmodel.npz holds format 'volspring.spring_topology', not 'volspring.model'"),

@@ -301,3 +301,40 @@ def test_writers_announce_a_frames_files_before_writing_them(tmp_path, model, an
     assert [name for name, _ in announced[0]] == (["frame.pvd", "frame_springs.pvd"] if make == "paraview"
                                                   else ["frame.pc2"])
     assert again.frame_paths()[0].name == ("frame_0001.vtu" if make == "paraview" else "frame_0001.obj")
+
+
+def test_the_tet_series_carries_each_tets_rotation_free_strain(tmp_path, model, mesh):
+    """Cell data ``strain`` is |U - I| of F = R U, the same on every rung: checked against scipy's polar
+    decomposition on sheared, noisy frames."""
+    from scipy.linalg import polar
+
+    writer = ParaViewWriter(tmp_path, model)
+    for k, state in enumerate(states(model, 2, seed=4)):
+        writer(k, state)
+        strain = meshio.read(tmp_path / f"frame_{k:04d}.vtu").cell_data["strain"][0]
+        corners = state.x[mesh.tets]
+        rest = mesh.points[mesh.tets]
+        expected = []
+        for now, before in zip(corners, rest):
+            F = (now[1:] - now[0]).T @ np.linalg.inv((before[1:] - before[0]).T)
+            expected.append(np.linalg.norm(polar(F)[1] - np.eye(3)))
+        np.testing.assert_allclose(strain, expected, rtol=1e-9, atol=1e-12)
+        assert (k == 0) or strain.max() > 0.01  # the sheared frame is strained
+
+
+def test_a_run_folder_notes_what_the_run_is_beside_its_files(tmp_path):
+    import json
+
+    from volspring.output import RunFolder
+
+    with RunFolder.open(tmp_path / "run", command=["volspring-sim", "beam.vtu"]) as run:
+        run.note("model", {"rung": "smoothed", "alpha": 0.6})
+        run.note("model", {"rung": "smoothed", "alpha": 0.5})  # a later note replaces the earlier
+        for key, value, message in [("files", [], "part of the run manifest's layout"),
+                                    ("model", {1, 2}, "note 'model': Object of type set")]:
+            with pytest.raises(ValueError, match=message):
+                run.note(key, value)
+    manifest = json.loads((tmp_path / "run" / "volspring-run.json").read_text())
+    assert manifest["model"] == {"rung": "smoothed", "alpha": 0.5} and manifest["status"] == "finished"
+    with pytest.raises(RuntimeError, match="is finished: it cannot note 'model'"):
+        run.note("model", {})

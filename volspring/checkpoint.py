@@ -15,10 +15,14 @@ Key scheme of the archive:
     (array, numpy scalar, float, int, bool, str, None, dict), so that a loaded memory has the
     same types as the saved one: ``3`` comes back an int, ``np.float32(3)`` a float32 scalar,
     an empty dict an empty dict; and, when saved with the run's scene, integrator and step
-    (format version 2), ``run``: the step ``dt``, the integrator's name and options, and a
+    (format version 2), ``run``: the step ``dt``, the integrator's name and options, the model's
+    rung (:data:`volspring.ladder.MODELS`; absent before the ladder: springs), and a
     fingerprint of the model (SHA-256 of its rest positions, springs, rest lengths, stiffness,
-    damping, masses and pinned nodes), so that :func:`load_checkpoint` refuses to resume another
-    model, another integrator or another step, naming what differs.
+    damping, masses and pinned nodes; of its rung and the arrays that define each of its other
+    element sets, so the corotated tets and nodal strain of the upper rungs: tets, per-tet shear and
+    bulk, regions, stiffness damping; of the supports and bodies where a scene has them), so that
+    :func:`load_checkpoint` refuses to resume another model (another rung, alpha, E, nu, ...),
+    another integrator or another step, naming what differs.
 
 Arrays are stored with their dtype and values unchanged (npz is lossless), so a run resumed
 from a checkpoint takes bit-identical steps to the run that saved it. The file is written to a
@@ -31,7 +35,6 @@ import hashlib
 import io
 import json
 import logging
-import pickle
 import zipfile
 import zlib
 from pathlib import Path
@@ -57,7 +60,13 @@ _FINGERPRINT_PARTS = {
     "damping": "the damping ratio or damping",
     "masses": "the density or the mesh",
     "pinned nodes": "the pins",
+    "held components": "the supports",
+    "node body": "the bodies",
+    "body materials": "the bodies' materials",
+    "rung": "rung of the ladder",
 }
+# Any other part is an element set besides the springs (``elements[i] TYPE``).
+_ELEMENT_CAUSE = "alpha, E, nu, regions or damping"
 
 
 class CheckpointMismatch(ValueError):
@@ -75,10 +84,15 @@ def model_fingerprint(scene) -> dict:
     Returns
     -------
     dict -- part name ("rest positions", "springs", "rest lengths", "stiffness", "damping",
-        "masses", "pinned nodes", and where a scene has them "held components" and one entry per
-        element set besides the springs) -> 16 hex digits of the SHA-256 of its bytes (dtype and shape
-        included), so equal digests mean bit-identical data
+        "masses", "pinned nodes", and where a scene has them "held components", "node body", "body
+        materials", "rung" (a model off the springs rung) and one entry per element set besides the
+        springs, ``"elements[i] TYPE"``) -> 16 hex digits of the SHA-256 of its bytes (dtype and shape
+        included), so equal digests mean bit-identical data. An element set is digested by the
+        arrays a model file stores for it (:data:`volspring.model_io.ELEMENT_SET_TYPES`), a set of
+        another type by its stencil only (its own data are not known here).
     """
+    from volspring.model_io import ELEMENT_SET_TYPES
+
     model = scene.model
     pins = np.zeros(0, dtype=np.int64) if scene.pins is None else scene.pins.nodes
     arrays = {"rest positions": model.rest_positions, "springs": model.springs, "rest lengths": model.rest_lengths,
@@ -90,17 +104,25 @@ def model_fingerprint(scene) -> dict:
         arrays["node body"] = model.node_body
         arrays["body materials"] = np.array([[m.E, m.nu, m.density] if m is not None else [np.nan] * 3
                                              for m in model.materials])
+    if model.rung != "springs":
+        arrays["rung"] = np.asarray(model.rung)
     for index, element_set in enumerate(model.elements):
         if element_set is not model.spring_elements:
-            arrays[f"elements[{index}] {type(element_set).__name__}"] = np.frombuffer(
-                pickle.dumps(element_set, protocol=5), dtype=np.uint8)
-    digests = {}
-    for name, array in arrays.items():
+            to_arrays = next((to_arrays for kind, to_arrays, _ in ELEMENT_SET_TYPES.values()
+                              if type(element_set) is kind), None)
+            parts = {"stencil": element_set.stencil} if to_arrays is None else to_arrays(element_set)
+            arrays[f"elements[{index}] {type(element_set).__name__}"] = parts
+    return {name: _digest(array) for name, array in arrays.items()}
+
+
+def _digest(value) -> str:
+    """16 hex digits of the SHA-256 of an array (dtype, shape and bytes), or of a dict of arrays by name."""
+    digest = hashlib.sha256()
+    for key, array in (sorted(value.items()) if isinstance(value, dict) else [("", value)]):
         array = np.ascontiguousarray(array)
-        digest = hashlib.sha256(f"{array.dtype.str}{array.shape}".encode())
+        digest.update(f"{key}{array.dtype.str}{array.shape}".encode())
         digest.update(array.tobytes())
-        digests[name] = digest.hexdigest()[:16]
-    return digests
+    return digest.hexdigest()[:16]
 
 
 def _integrator_record(integrator) -> dict:
@@ -156,7 +178,7 @@ def save_checkpoint(path, state: State, *, scene=None, integrator=None, dt=None)
         raise ValueError("save_checkpoint records a run with scene, integrator and dt together; got only "
                          + ", ".join(name for name, ok in zip(("scene", "integrator", "dt"), given) if ok))
     if all(given):
-        manifest["run"] = {"dt": float(dt), "integrator": _integrator_record(integrator),
+        manifest["run"] = {"dt": float(dt), "integrator": _integrator_record(integrator), "rung": scene.model.rung,
                            "fingerprint": model_fingerprint(scene)}
     for name in ("x", "v"):
         if arrays[name].dtype == object:
@@ -253,10 +275,15 @@ def _check_run(path, run, scene, integrator, dt) -> None:
                     f"{key} = {theirs['options'].get(key)!r} (now {mine['options'].get(key)!r})" for key in changed))
             raise CheckpointMismatch(f"{path} was written with {what}")
     if scene is not None:
-        mine = model_fingerprint(scene)
-        differ = [name for name in _FINGERPRINT_PARTS if mine.get(name) != run["fingerprint"].get(name)]
+        rung = run.get("rung", "springs")  # checkpoints from before the ladder: springs
+        if rung != scene.model.rung:
+            raise CheckpointMismatch(f"{path} was written for a model on the {rung!r} rung; this run's model is on "
+                                     f"the {scene.model.rung!r} rung (resume with the model= of the run that wrote it)")
+        mine, theirs = model_fingerprint(scene), run["fingerprint"]
+        others = sorted((set(mine) | set(theirs)) - set(_FINGERPRINT_PARTS))
+        differ = [name for name in [*_FINGERPRINT_PARTS, *others] if mine.get(name) != theirs.get(name)]
         if differ:
-            causes = sorted({_FINGERPRINT_PARTS[name] for name in differ})
+            causes = sorted({_FINGERPRINT_PARTS.get(name, _ELEMENT_CAUSE) for name in differ})
             raise CheckpointMismatch(f"{path} was written for another model: its {', '.join(differ)} differ "
                                      f"(another {'; '.join(causes)}?)")
 

@@ -12,18 +12,30 @@ The file is a compressed ``.npz`` (numpy, read without pickle), by convention na
     (a model from arrays has none: its row is NaN);
 ``body_names`` (b,) text, ``rule`` () text
     as in the model;
+``rung`` () text
+    the model's rung of the ladder (:data:`volspring.ladder.MODELS`); files written before the
+    ladder have none and load as ``"springs"``, which they are;
 ``element_types`` (e,) text
     the type of every element set, in the model's order, as named in :data:`ELEMENT_SET_TYPES`
-    (``"springs"``); set ``i``'s arrays are ``elements/i/NAME``. For springs: ``pairs`` (s, 2) int64,
-    ``stiffness`` (s,) float64 [N/m], ``damping`` (s,) float64 [N s/m], ``rest_lengths`` (s,)
-    float64 [m], ``kinds`` (s,) int8 with ``kind_names`` (k,) text (the labels of ``SPRING_KINDS``);
+    (``"springs"``, ``"corotated_tets"``, ``"nodal_strain"``); set ``i``'s arrays are
+    ``elements/i/NAME``. For springs: ``pairs`` (s, 2) int64, ``stiffness`` (s,) float64 [N/m],
+    ``damping`` (s,) float64 [N s/m], ``rest_lengths`` (s,) float64 [m], ``kinds`` (s,) int8 with
+    ``kind_names`` (k,) text (the labels of ``SPRING_KINDS``). For the continuum sets
+    (:mod:`volspring.elements.continuum`), what their constructor takes, the rest positions being
+    the model's first ``node_count``: ``node_count`` () int64, ``tets`` (T, 4) int64,
+    ``stiffness_damping`` () float64 [s], and per tet ``shear`` (T,) float64 [Pa]; a nodal strain
+    set also ``bulk`` (T,) float64 [Pa] and ``regions`` (T,) int64 (its per-domain coefficients and
+    smoothing domains are rebuilt from these);
 ``has_topology`` () bool, and ``topology/NAME``
     the spring topology the model was built from, if any, in the layout of a topology file
     (:mod:`meshing.topology_io`: points, mesh_node_count, tets, springs, kinds, shell data).
 
 Only element sets of the types in :data:`ELEMENT_SET_TYPES` can be stored: :func:`save_model`
 refuses a model with any other (a user's volume term, say) with a TypeError naming its type, rather
-than write a file that would load as another model. The write is atomic; :func:`load_model` checks
+than write a file that would load as another model; and a continuum set built on rest positions
+other than the model's (which the file would not rebuild) with a ValueError. A volspring older than
+the ladder reads the files of a springs model and refuses those with continuum sets, naming the
+type; the format version stays 1, as no array of a version-1 file changed meaning. The write is atomic; :func:`load_model` checks
 the format name and version (a newer version is refused naming the file, the version found and
 those supported), refuses a missing or malformed array naming the file and the array, and builds the
 model through its own checks, so a loaded model gives the same forces bit for bit.
@@ -38,6 +50,14 @@ Examples
 >>> path = save_model(Path(tempfile.mkdtemp()) / "cube.vsmodel.npz", model)
 >>> load_model(path)
 Model(27 nodes, 98 springs, rule='van_gelder', mass 1000 kg)
+
+Every rung of the ladder is stored, its element sets bit for bit:
+
+>>> smoothed = Model.from_mesh(structured_box((2, 2, 2), (1.0, 1.0, 1.0)), Material(E=1e5, nu=0.45, density=1000.0),
+...                            model="smoothed")
+>>> loaded = load_model(save_model(Path(tempfile.mkdtemp()) / "cube.vsmodel.npz", smoothed))
+>>> loaded.rung, [type(element_set).__name__ for element_set in loaded.elements]
+('smoothed', ['CorotatedTets', 'NodalStrain'])
 """
 
 from __future__ import annotations
@@ -49,7 +69,8 @@ import numpy as np
 from meshing._archive import labelled_codes, read_archive, take_array, write_archive
 from meshing.topology import SPRING_KINDS
 from meshing.topology_io import topology_arrays, topology_from_arrays
-from volspring.elements import Springs
+from volspring.elements import CorotatedTets, NodalStrain, Springs
+from volspring.elements.tet_kinematics import TetGradients
 from volspring.material import Material
 from volspring.model import Model
 
@@ -77,8 +98,66 @@ def _springs_from_arrays(arrays, path, prefix, node_count) -> Springs:
                    take("damping", ("s",), "f"), take("rest_lengths", ("s",), "f"), kinds)
 
 
+def _continuum_common(element_set) -> dict:
+    return {"node_count": np.asarray(element_set.node_count, dtype=np.int64),
+            "tets": np.asarray(element_set.kinematics.tets, dtype=np.int64),
+            "stiffness_damping": np.asarray(element_set.stiffness_damping, dtype=np.float64)}
+
+
+def _corotated_arrays(tets: CorotatedTets) -> dict:
+    return _continuum_common(tets) | {"shear": np.asarray(tets.shear, dtype=np.float64)}
+
+
+def _nodal_strain_arrays(nodal: NodalStrain) -> dict:
+    # Every corner of a tet lies in a domain of the tet's region with the tet's coefficients (the
+    # constructor checks it), so corner 0's domain gives back the per-tet inputs exactly.
+    corner = nodal.domains.corner_domain[:, 0]
+    return _continuum_common(nodal) | {"shear": nodal.shear[corner], "bulk": nodal.bulk[corner],
+                                       "regions": np.asarray(nodal.domains.region[corner], dtype=np.int64)}
+
+
+def _continuum_inputs(arrays, path, prefix, rest_positions):
+    def take(name, shape, kind):
+        return take_array(arrays, prefix + name, path, shape=shape, kind=kind)
+
+    node_count = int(take("node_count", (), "i"))
+    if not 0 < node_count <= len(rest_positions):
+        raise ValueError(f"{path} is damaged: {prefix}node_count = {node_count}, but the model has "
+                         f"{len(rest_positions)} nodes")
+    return (rest_positions[:node_count], take("tets", ("T", 4), "i"), float(take("stiffness_damping", (), "f")),
+            lambda name: take(name, ("T",), "f"))
+
+
+def _corotated_from_arrays(arrays, path, prefix, rest_positions) -> CorotatedTets:
+    rest, tets, damping, per_tet = _continuum_inputs(arrays, path, prefix, rest_positions)
+    return CorotatedTets(rest, tets, per_tet("shear"), stiffness_damping=damping)
+
+
+def _nodal_strain_from_arrays(arrays, path, prefix, rest_positions) -> NodalStrain:
+    rest, tets, damping, per_tet = _continuum_inputs(arrays, path, prefix, rest_positions)
+    regions = take_array(arrays, prefix + "regions", path, shape=("T",), kind="i")
+    return NodalStrain(rest, tets, per_tet("shear"), per_tet("bulk"), regions=regions, stiffness_damping=damping)
+
+
+def _check_rebuilt_from(model, index, element_set) -> None:
+    """Refuse a continuum set whose rest state is not the model's (the file rebuilds it from the model's)."""
+    rest = model.rest_positions[: element_set.node_count]
+    mine = element_set.kinematics
+    rebuilt = TetGradients.at_rest(rest, mine.tets)
+    if not (np.array_equal(rebuilt.volumes, mine.volumes) and np.array_equal(rebuilt.gradients, mine.gradients)):
+        raise ValueError(f"cannot save model.elements[{index}], a {type(element_set).__name__}: it was built on rest "
+                         "positions other than the model's, and a model file rebuilds it from the model's rest "
+                         "positions; build it on model.rest_positions")
+
+
+def _springs_from_file(arrays, path, prefix, rest_positions) -> Springs:
+    return _springs_from_arrays(arrays, path, prefix, len(rest_positions))
+
+
 #: The element-set types a model file can hold: name in the file -> (type, its arrays, the set from arrays).
-ELEMENT_SET_TYPES = {"springs": (Springs, _springs_arrays, _springs_from_arrays)}
+ELEMENT_SET_TYPES = {"springs": (Springs, _springs_arrays, _springs_from_file),
+                     "corotated_tets": (CorotatedTets, _corotated_arrays, _corotated_from_arrays),
+                     "nodal_strain": (NodalStrain, _nodal_strain_arrays, _nodal_strain_from_arrays)}
 
 
 def save_model(path, model: Model) -> Path:
@@ -100,6 +179,8 @@ def save_model(path, model: Model) -> Path:
     TypeError
         For something that is not a Model, or an element set of a type a model file cannot hold
         (not in :data:`ELEMENT_SET_TYPES`), naming the set and its type; nothing is written then.
+    ValueError
+        For a continuum set built on rest positions other than the model's; nothing is written then.
     """
     if not isinstance(model, Model):
         raise TypeError(f"model must be a volspring.Model, got {type(model).__name__}")
@@ -113,6 +194,7 @@ def save_model(path, model: Model) -> Path:
         "material_given": given,
         "body_names": np.array(model.body_names, dtype=str),
         "rule": np.asarray(model.rule),
+        "rung": np.asarray(model.rung),
         "has_topology": np.asarray(model.topology is not None),
     }
     types = []
@@ -122,6 +204,8 @@ def save_model(path, model: Model) -> Path:
             known = ", ".join(kind.__name__ for kind, _, _ in ELEMENT_SET_TYPES.values())
             raise TypeError(f"cannot save model.elements[{index}], a {type(element_set).__name__}: a model file "
                             f"holds element sets of the types {known} only, and would silently lose this one")
+        if name != "springs":
+            _check_rebuilt_from(model, index, element_set)
         types.append(name)
         to_arrays = ELEMENT_SET_TYPES[name][1]
         arrays.update({f"elements/{index}/{key}": value for key, value in to_arrays(element_set).items()})
@@ -158,7 +242,6 @@ def load_model(path) -> Model:
         return take_array(arrays, name, path, shape=shape, kind=kind)
 
     rest_positions = take("rest_positions", ("n", 3), "f")
-    node_count = len(rest_positions)
     masses = take("masses", ("n",), "f")
     node_body = take("node_body", ("n",), "i")
     rows = take("materials", ("b", 3), "f")
@@ -168,6 +251,7 @@ def load_model(path) -> Model:
         raise ValueError(f"{path} is damaged: 'materials', 'material_given' and 'body_names' have "
                          f"{len(rows)}, {len(given)} and {len(names)} rows; expected one per body each")
     rule = str(take("rule", (), "U"))
+    rung = str(take("rung", (), "U")) if "rung" in arrays else "springs"  # files from before the ladder
     types = [str(name) for name in take("element_types", ("e",), "U")]
     try:
         materials = tuple(Material(E=E, nu=nu, density=density) if present else None
@@ -178,12 +262,12 @@ def load_model(path) -> Model:
                 raise ValueError(f"{path} holds an element set of type {name!r} (elements[{index}]), which this "
                                  f"volspring cannot read (known: {', '.join(ELEMENT_SET_TYPES)})")
             from_arrays = ELEMENT_SET_TYPES[name][2]
-            elements.append(from_arrays(arrays, path, f"elements/{index}/", node_count))
+            elements.append(from_arrays(arrays, path, f"elements/{index}/", rest_positions))
         topology = None
         if bool(take("has_topology", (), "b")):
             topology = topology_from_arrays(arrays, path, prefix="topology/")
         return Model(rest_positions, masses, tuple(elements), topology=topology, rule=rule, node_body=node_body,
-                     materials=materials, body_names=tuple(str(name) for name in names))
+                     materials=materials, body_names=tuple(str(name) for name in names), rung=rung)
     except ValueError as error:
         if str(path) in str(error):
             raise

@@ -18,14 +18,14 @@ non-finite state ever reaches the callback. Runaway energy also raises it, check
 frame and at least every ``ENERGY_CHECK_INTERVAL`` = 8 steps (an energy costs about one force
 evaluation: checking every step would double the cost of a symplectic Euler step, while an
 unstable mode needs well over 8 steps to go from visible to overflow) on the total energy
-E = kinetic + potential (springs and forces with a potential):
+E = kinetic + potential (the model's element sets and forces with a potential):
 
 - with ``energy_limit`` [J]: when E > energy_limit (``math.inf`` turns the check off);
 - by default, against what the scene can physically hold: the start energy E_0 plus the work W
   done so far by the scene's forces without a potential (drag, wind, user fields) and by
   prescribed pin motions (trapezoidal rule per step; the pins' work by the work-energy theorem
   on the pinned nodes), with an allowance of ``runaway_factor`` * S, S the energy scale of the
-  start, S = kinetic_0 + spring_0 + L * sum_i |F_ext,i| (L the diagonal of the rest bounding box,
+  start, S = kinetic_0 + elastic_0 + L * sum_i |F_ext,i| (L the diagonal of the rest bounding box,
   F_ext the scene's forces at the start: for gravity S includes M g L, the work of falling one
   body size). The run has diverged when the excess E - E_0 - W is above the allowance *and has
   grown* at ``runaway_checks`` = 3 consecutive checks. A conservative run keeps the excess near 0;
@@ -290,9 +290,11 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
         records["angular"].append(angular_momentum(scene, current))
         inversion = tet_inversion(scene, current.x)
         if inversion.count and not any(records["inverted"]):
+            why = ("springs do not resist inversion" if scene.model.rung == "springs"
+                   else f"the {scene.model.rung!r} model resists it but was overpowered")
             message = (f"{inversion.count} of {inversion.tet_count} tets are inverted at t = {current.t:.6g} s "
-                       f"(worst volume ratio {inversion.worst_volume_ratio:.3g}): springs do not resist "
-                       "inversion; a stiffer material, smaller loads or smaller steps keep tets the right way out")
+                       f"(worst volume ratio {inversion.worst_volume_ratio:.3g}): {why}; a stiffer material, "
+                       "smaller loads or smaller steps keep tets the right way out")
             logger.warning(message)
             warnings.warn(message, TetsInvertedWarning, stacklevel=3)
         records["inverted"].append(inversion.count)

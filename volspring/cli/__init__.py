@@ -2,7 +2,8 @@
 
 A mesh file (any volume format meshio reads), a spring topology file from ``volspring-mesh``
 (``NAME.vstopo.npz``: the tet mesh with its shells, which the model then has) or a built-in shape
-(``box:1,0.1,0.1``), a material, pins by regions (``--pin xmin``, ``--pin "x<0.01"``,
+(``box:1,0.1,0.1``), a rung of the model ladder (``--model springs``, ``springs+volume`` or ``smoothed``,
+:mod:`volspring.ladder`), a material (and one per region tag of the mesh file, ``--region-material``), pins by regions (``--pin xmin``, ``--pin "x<0.01"``,
 ``--pin XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX``: :func:`volspring.regions.parse_region`), gravity, an integrator and a step; frames written as a
 ParaView series (and optionally a Blender surface cache), checkpoints to resume from, a progress bar
 on stderr and a summary on stdout. A fuller scene format is for a later version.
@@ -25,6 +26,9 @@ Examples
 ...       "--duration", "0.01", "--dt", "0.005", "--out", tempfile.mkdtemp(), "--quiet"])
 0
 >>> main(["box:0.2,0.05,0.05", "--size", "0.05", "--pin", "xmin", "--duration", "0.01", "--quiet"])
+0
+>>> main(["box:0.2,0.05,0.05", "--size", "0.05", "--pin", "xmin", "--duration", "0.01", "--quiet",
+...       "--model", "smoothed", "--nu", "0.49"])
 0
 """
 

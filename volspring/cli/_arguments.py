@@ -11,7 +11,7 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["InputError", "UsageError", "build_parser", "check_arguments", "joined_vectors"]
+__all__ = ["InputError", "UsageError", "build_parser", "check_arguments", "joined_vectors", "region_materials"]
 
 PROG = "volspring-sim"
 CHECKPOINT_NAME = "checkpoint.npz"
@@ -47,12 +47,14 @@ def build_parser() -> argparse.ArgumentParser:
     (['xmin'], 0.01, 'implicit_euler')
     """
     from volspring.integrators import INTEGRATORS
+    from volspring.ladder import DEFAULT_ALPHA, MODELS
     from volspring.model import STIFFNESS_RULES
     from volspring.simulate import RUNAWAY_CHECKS, RUNAWAY_FACTOR
     from volspring.output.run_folder import MANIFEST_NAME as MANIFEST
     from meshing.units import add_unit_arguments
 
-    parser = _Parser(prog=PROG, description="Simulate a volumetric soft body as a tetrahedral mass-spring model.",
+    parser = _Parser(prog=PROG, description="Simulate a volumetric soft body on a tetrahedral mesh, as a mass-spring "
+                                            "model or on an upper rung of the model ladder (--model).",
                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("input", metavar="INPUT",
                         help="a volume mesh file (.msh, .vtu, .mesh, ...), a spring topology file from "
@@ -65,15 +67,29 @@ def build_parser() -> argparse.ArgumentParser:
     body.add_argument("--seed", type=int, help="random seed of the mesher")
     add_unit_arguments(body, applies_to="INPUT (a mesh file's coordinates or a shape's dimensions), --size, the --pin "
                                         "numbers and --render-surface", scale_applies_to="INPUT and --render-surface")
+    body.add_argument("--model", choices=MODELS, default="springs",
+                      help="the rung of the model ladder: springs (the fastest; ignores nu), springs+volume (springs "
+                           "plus a nodal volume term that honours nu from about 0.25 to 0.499) or smoothed (the "
+                           "smoothed-strain element: FEM-accurate E and nu, no springs)")
+    body.add_argument("--alpha", type=float, default=None,
+                      help=f"--model smoothed only: the weight in [0, 1] of its nodal (smoothed) shear (default "
+                           f"{DEFAULT_ALPHA:g})")
     body.add_argument("--E", type=float, default=1e6, help="Young's modulus [Pa] (soft rubber)")
     body.add_argument("--nu", type=float, default=None,
-                      help=f"Poisson's ratio [-] (default {DEFAULT_NU}); the spring rules ignore it: pure springs have "
+                      help=f"Poisson's ratio [-] (default {DEFAULT_NU}); --model springs ignores it: pure springs have "
                            "one effective Poisson ratio whatever nu is asked (the Cauchy limit), and say so when "
-                           "--nu is given")
+                           "--nu is given; --model smoothed and springs+volume honour it")
     body.add_argument("--density", type=float, default=1100.0, help="density [kg/m^3]")
-    body.add_argument("--rule", choices=STIFFNESS_RULES, default="van_gelder", help="spring stiffness rule")
+    body.add_argument("--region-material", action="append", default=[], metavar="TAG:E[:NU[:DENSITY]]",
+                      help="the material of the tets tagged TAG in the mesh file (gmsh physical groups, Medit "
+                           "references, a 'region' cell array), repeatable; NU and DENSITY default to --nu and "
+                           "--density; untagged regions take --E, --nu and --density")
+    body.add_argument("--rule", choices=STIFFNESS_RULES, default=None,
+                      help="spring stiffness rule (default van_gelder; springs and springs+volume only)")
     body.add_argument("--stiffness", type=float, help="the raw spring constant of --rule uniform [N/m]")
-    body.add_argument("--damping-ratio", type=float, default=0.05, help="damping ratio of every spring [-]")
+    body.add_argument("--damping-ratio", type=float, default=0.05,
+                      help="damping ratio [-]: of every spring; on the continuum terms of springs+volume and smoothed, "
+                           "Rayleigh stiffness damping with this ratio at the model's highest frequency")
     scene = parser.add_argument_group("scene")
     scene.add_argument("--gravity", default="0,0,-9.81", help="gravity gx,gy,gz [m/s^2], or 'off'")
     scene.add_argument("--drag", type=float, default=0.0, help="global viscous drag rate [1/s]")
@@ -96,7 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
                           "energy check off (NaN and Inf are always caught)")
     output = parser.add_argument_group("output")
     output.add_argument("--out", type=Path, metavar="DIR",
-                        help=f"write the frames there ({SERIES_NAME}.pvd: tets, {SERIES_NAME}_springs.pvd: springs)")
+                        help=f"write the frames there ({SERIES_NAME}.pvd: tets, {SERIES_NAME}_springs.pvd: springs, "
+                             "for a model with springs)")
     output.add_argument("--blender", action="store_true",
                         help=f"also write the boundary surface as {SURFACE_NAME}_NNNN.obj and {SURFACE_NAME}.pc2")
     output.add_argument("--render-surface", type=Path, metavar="FILE",
@@ -106,8 +123,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help=f"save {CHECKPOINT_NAME} in DIR every N frames and at the end")
     output.add_argument("--resume", type=Path, metavar="CHECKPOINT",
                         help="continue a run from its checkpoint up to --duration; the checkpoint records the "
-                             "model, integrator and --dt of its run, and a resume with another INPUT, material, "
-                             "pins, integrator or --dt is refused, naming what differs (a resumed run is "
+                             "model, integrator and --dt of its run, and a resume with another INPUT, --model, "
+                             "--alpha, material, pins, integrator or --dt is refused, naming what differs (a resumed run is "
                              "bit-identical to one that never stopped)")
     output.add_argument("--overwrite", action="store_true",
                         help="replace the outputs of an earlier run in DIR: only the files its manifest "
@@ -117,6 +134,33 @@ def build_parser() -> argparse.ArgumentParser:
                         help="progress bar on stderr (default: when stderr is a terminal)")
     output.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary")
     return parser
+
+
+def region_materials(texts) -> dict:
+    """``--region-material TAG:E[:NU[:DENSITY]]`` values as ``{tag: (E, nu or None, density or None)}``.
+
+    Raises :class:`InputError` for a value that is not that form, a negative tag or a tag given twice.
+
+    >>> region_materials(["2:5e6", "3:1e5:0.49:900"])
+    {2: (5000000.0, None, None), 3: (100000.0, 0.49, 900.0)}
+    """
+    found = {}
+    for text in texts:
+        parts = text.split(":")
+        try:
+            if not 2 <= len(parts) <= 4:
+                raise ValueError
+            tag, numbers = int(parts[0]), [float(part) for part in parts[1:]]
+        except ValueError:
+            raise InputError(f"--region-material {text!r} is not TAG:E[:NU[:DENSITY]] (an integer tag, then numbers "
+                             "in Pa, -, kg/m^3)") from None
+        if tag < 0:
+            raise InputError(f"--region-material {text!r}: the tag {tag} is negative; expected a tag >= 0")
+        if tag in found:
+            raise InputError(f"--region-material gives tag {tag} twice")
+        numbers += [None] * (3 - len(numbers))
+        found[tag] = tuple(numbers)
+    return found
 
 
 def joined_vectors(argv) -> list:
@@ -162,6 +206,21 @@ def check_arguments(args) -> None:
         raise InputError("--render-surface needs --blender (it is the surface the Blender output carries)")
     if args.rule == "uniform" and args.stiffness is None:
         raise InputError("--rule uniform needs --stiffness (the raw spring constant [N/m])")
+    if args.alpha is not None:
+        if args.model != "smoothed":
+            raise InputError(f"--alpha applies to --model smoothed (the weight of its nodal shear), not --model "
+                             f"{args.model}")
+        if not (math.isfinite(args.alpha) and 0.0 <= args.alpha <= 1.0):
+            raise InputError(f"--alpha = {args.alpha:g} is not in [0, 1]")
+    if args.model == "smoothed":
+        given = [flag for flag, value in (("--rule", args.rule), ("--stiffness", args.stiffness)) if value is not None]
+        if given:
+            raise InputError(f"--model smoothed has no springs: {' and '.join(given)} "
+                             f"{'do' if len(given) > 1 else 'does'} not apply (use --model springs or springs+volume)")
+    if args.model == "springs+volume" and args.rule == "uniform":
+        raise InputError("--model springs+volume derives its springs from the material: use --rule van_gelder or "
+                         "lloyd, not uniform")
+    region_materials(args.region_material)  # a malformed value is refused before any work
     if args.damping_ratio < 0 or not math.isfinite(args.damping_ratio):
         raise InputError(f"--damping-ratio = {args.damping_ratio:g} is not a finite number >= 0")
     if args.newton_iterations < 0:

@@ -2,7 +2,9 @@
 
 The data path of the command: INPUT (a mesh file, a spring topology file with shells, or a built-in shape,
 in ``--units``) -> :func:`load_mesh` -> :func:`build_model` (material, stiffness rule, damping) -> :func:`build_scene`
-(gravity, drag, ``--pin`` regions read by :func:`volspring.regions.parse_region`). Bad values raise
+(gravity, drag, ``--pin`` regions read by :func:`volspring.regions.parse_region`). The model is on the rung of
+``--model`` (:mod:`volspring.ladder`), with a material per region tag of the mesh file for ``--region-material``
+(:func:`meshing.mesh_io.read_tet_regions`). Bad values raise
 :class:`~volspring.cli._arguments.InputError` or ValueError, naming the option and the value.
 """
 
@@ -13,9 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from volspring.cli._arguments import DEFAULT_NU, InputError
+from volspring.cli._arguments import DEFAULT_NU, InputError, region_materials
 
-__all__ = ["anchored_surface", "build_model", "build_scene", "gravity_vector", "load_mesh", "pinned_nodes"]
+__all__ = ["anchored_surface", "build_model", "build_scene", "gravity_vector", "load_mesh", "pinned_nodes",
+           "model_record", "tet_regions"]
 
 
 def load_mesh(args):
@@ -80,18 +83,103 @@ def _read_topology(path, units, scale):
 
 
 def build_model(args, mesh):
-    """The spring model of ``mesh`` (a TetMesh, or a SpringTopology whose shells the model keeps) with the
-    material, rule and damping of the arguments."""
+    """The model of ``mesh`` (a TetMesh, or a SpringTopology whose shells the model keeps) on the rung of
+    ``--model``, with the material, region materials, rule and damping of the arguments."""
     from volspring.material import Material
-    from volspring.elements.spring_rules import NU_IGNORING_RULES
     from volspring.model import Model
 
-    material = Material(E=args.E, nu=DEFAULT_NU if args.nu is None else args.nu, density=args.density)
-    if args.nu is not None and args.rule in NU_IGNORING_RULES:
-        warnings.warn(f"--nu {args.nu:g} is ignored by --rule {args.rule}: pure springs have one effective Poisson "
-                      "ratio whatever nu is asked (the Cauchy limit; volspring-validate cauchy measures it)",
+    if args.model == "smoothed" and getattr(mesh, "shell_node_count", 0):
+        raise InputError(f"--model smoothed takes a tet mesh without shells (shells are springs); {args.input} has "
+                         f"{mesh.shell_node_count} shell nodes: give the tet mesh file, or use --model springs or "
+                         "springs+volume")
+    nu = DEFAULT_NU if args.nu is None else args.nu
+    material = Material(E=args.E, nu=nu, density=args.density)
+    regions, materials = tet_regions(args, mesh, material)
+    asked_nu = args.nu is not None or any(given is not None for _, given, _ in
+                                           region_materials(args.region_material).values())
+    if args.model == "springs" and asked_nu:
+        what = f"--nu {nu:g}" if args.nu is not None else "the nu of --region-material"
+        warnings.warn(f"{what} is ignored by --model springs (--rule {args.rule or 'van_gelder'}): pure "
+                      "springs have one effective Poisson ratio whatever nu is asked (the Cauchy limit; volspring-validate "
+                      "cauchy measures it); --model smoothed honours nu (springs+volume too, for nu from about 0.25)",
                       UserWarning, stacklevel=2)
-    return Model.from_mesh(mesh, material, rule=args.rule, stiffness=args.stiffness, damping_ratio=args.damping_ratio)
+    try:
+        return Model.from_mesh(mesh, material, model=args.model, rule=args.rule or "van_gelder",
+                               stiffness=args.stiffness, damping_ratio=args.damping_ratio, alpha=args.alpha,
+                               regions=regions, materials=materials)
+    except ValueError as error:
+        raise InputError(str(error)) from error
+
+
+def model_record(args, model) -> dict:
+    """What the run's model is, for the run manifest and the summary: rung, alpha, material, rule, damping, regions."""
+    from volspring.ladder import DEFAULT_ALPHA
+
+    record = {"rung": model.rung, "E": args.E, "nu": DEFAULT_NU if args.nu is None else args.nu,
+              "density": args.density, "damping_ratio": args.damping_ratio}
+    if model.rung == "smoothed":
+        record["alpha"] = DEFAULT_ALPHA if args.alpha is None else args.alpha
+    else:
+        record["rule"] = args.rule or "van_gelder"
+        if args.stiffness is not None:
+            record["stiffness"] = args.stiffness
+    if args.region_material:
+        record["region_materials"] = {str(tag): {"E": E, "nu": nu, "density": density}
+                                      for tag, (E, nu, density) in region_materials(args.region_material).items()}
+    record["element_sets"] = [_described(element_set) for element_set in model.elements]
+    return record
+
+
+def _described(element_set) -> str:
+    """``"61 springs"``, ``"24 corotated tets"``, ``"nodal strain on 20 smoothing domains"``."""
+    from volspring.elements import CorotatedTets, NodalStrain, Springs
+
+    if isinstance(element_set, Springs):
+        return f"{element_set.spring_count} springs"
+    if isinstance(element_set, CorotatedTets):
+        return f"{element_set.element_count} corotated tets"
+    if isinstance(element_set, NodalStrain):
+        what = "nodal volume term" if not element_set.shear.any() else "nodal strain"
+        return f"{what} on {element_set.domains.domain_count} smoothing domains"
+    return f"{element_set.element_count} {type(element_set).__name__}"
+
+
+def tet_regions(args, mesh, material):
+    """``(regions, materials)`` for ``Model.from_mesh`` from ``--region-material``: the mesh file's region tag
+    of every tet and a Material per tag given; ``(None, None)`` without the option."""
+    from meshing.mesh_io import REGION_TAG_NAMES, read_tet_regions
+    from meshing.topology_io import is_topology_path
+    from volspring.material import Material
+
+    given = region_materials(args.region_material)
+    if not given:
+        return None, None
+    path = Path(args.input)
+    if not path.is_file() or is_topology_path(path):
+        what = "a spring topology file" if path.is_file() else "a built-in shape"
+        raise InputError(f"--region-material needs a mesh file whose tets carry region tags; INPUT is {what}")
+    try:
+        regions = read_tet_regions(path)
+    except (ValueError, FileNotFoundError) as error:
+        raise InputError(str(error)) from error
+    if regions is None:
+        raise InputError(f"--region-material: {path} has no region tags on its tets (looked for the cell data "
+                         f"{', '.join(REGION_TAG_NAMES)})")
+    if len(regions) != mesh.tet_count:  # read_tet_regions follows TetMesh.read's tet order; a guard all the same
+        raise InputError(f"{path} has {len(regions)} region tags for {mesh.tet_count} tets")
+    present = np.unique(regions)
+    missing = sorted(set(given) - set(present.tolist()))
+    if missing:
+        raise InputError(f"--region-material names tag(s) {', '.join(map(str, missing))}, but no tet of {path} has "
+                         f"them (tags present: {', '.join(map(str, present.tolist()))})")
+    materials = {}
+    for tag, (E, nu, density) in given.items():
+        try:
+            materials[tag] = Material(E=E, nu=material.nu if nu is None else nu,
+                                      density=material.density if density is None else density)
+        except ValueError as error:
+            raise InputError(f"--region-material {tag}: {error}") from error
+    return regions, materials
 
 
 def build_scene(args, model):

@@ -106,6 +106,9 @@ def _run_in(args, where: RunProgress, folder) -> int:
     started = time.perf_counter()
     body, origin = _build.load_mesh(args)  # a TetMesh, or a SpringTopology with shells
     model = _build.build_model(args, body)
+    record = _build.model_record(args, model)
+    if folder is not None:
+        folder.note("model", record)
     scene = _build.build_scene(args, model)
     integrator = make_integrator(args.integrator, **({"newton_iterations": args.newton_iterations}
                                                      if args.newton_iterations else {}))
@@ -157,7 +160,7 @@ def _run_in(args, where: RunProgress, folder) -> int:
         folder.record(args.out / CHECKPOINT_NAME)
         save_checkpoint(args.out / CHECKPOINT_NAME, result.state, scene=scene, integrator=integrator, dt=args.dt)
     if not args.quiet:
-        summary(args, origin, model, scene, integrator, result, first_frame, time.perf_counter() - started)
+        summary(args, origin, model, scene, integrator, result, first_frame, time.perf_counter() - started, record)
     return 0
 
 

@@ -77,20 +77,28 @@ class Progress:
             self.drawn = False
 
 
-def summary(args, origin, model, scene, integrator, result, first_frame, seconds) -> None:
-    """Print what was run and how it ended on stdout: body, run, end state, inverted tets, outputs."""
+def summary(args, origin, model, scene, integrator, result, first_frame, seconds, record=None) -> None:
+    """Print what was run and how it ended on stdout: body, model, run, end state, inverted tets, outputs.
+
+    ``record`` is the model's description (:func:`volspring.cli._build.model_record`), for its line.
+    """
     state = result.state
     displacement = np.linalg.norm(state.x - model.rest_positions, axis=1)
     pinned = 0 if scene.pins is None else len(scene.pins.nodes)
     topology = model.topology
     mesh = topology.mesh
-    nodes, springs = f"{mesh.node_count} nodes", f"{model.spring_count} springs"
+    nodes = f"{mesh.node_count} nodes"
+    springs = f", {model.spring_count} springs" if model.spring_count else ""
     if topology.shell_node_count:  # a topology file with shells: the model has them too
         nodes += f" + {topology.shell_node_count} shell nodes in {topology.layer_count} layer(s)"
         springs += f" ({model.spring_count - model.kind_counts()['tet_edge']} shell springs)"
     lines = [
-        f"body: {origin}: {nodes}, {mesh.tet_count} tets, {springs}, "
+        f"body: {origin}: {nodes}, {mesh.tet_count} tets{springs}, "
         f"mass {model.total_mass:.6g} kg, {pinned} pinned node(s)",
+    ]
+    if record is not None:
+        lines.append(_model_line(record))
+    lines += [
         f"run: {integrator.name}, dt = {args.dt:g} s, {result.steps_taken} steps to t = {state.t:.6g} s "
         f"in {seconds:.2f} s wall time",
         f"end: max displacement {displacement.max():.6g} m (node {int(displacement.argmax())}), "
@@ -99,8 +107,21 @@ def summary(args, origin, model, scene, integrator, result, first_frame, seconds
         f"{result.inverted_tets.max()} at a frame; worst volume ratio {np.nanmin(result.worst_volume_ratio):.3g}",
     ]
     if args.out is not None:
-        lines.append(f"output: {first_frame + result.frame_count} frame(s) in {args.out} "
-                     f"({SERIES_NAME}.pvd, {SERIES_NAME}_springs.pvd"
+        lines.append(f"output: {first_frame + result.frame_count} frame(s) in {args.out} ({SERIES_NAME}.pvd"
+                     + (f", {SERIES_NAME}_springs.pvd" if model.spring_count else "")
                      + (f", {SURFACE_NAME}_NNNN.obj, {SURFACE_NAME}.pc2" if args.blender else "")
                      + (f", {CHECKPOINT_NAME}" if args.checkpoint_every else "") + ")")
     print("\n".join(lines))
+
+
+def _model_line(record) -> str:
+    """``model: smoothed (alpha 0.6), E 1e+06 Pa, nu 0.45 (honoured), ...`` from a model record."""
+    rung = record["rung"]
+    detail = f"alpha {record['alpha']:g}" if "alpha" in record else f"rule {record['rule']}"
+    nu = f"nu {record['nu']:g}" + (" (not used by springs)" if rung == "springs" else "")
+    regions = record.get("region_materials")
+    text = (f"model: {rung} ({detail}), E {record['E']:g} Pa, {nu}, density {record['density']:g} kg/m^3, "
+            f"damping ratio {record['damping_ratio']:g}")
+    if regions:
+        text += f", {len(regions)} region material(s) (tags {', '.join(regions)})"
+    return text + "; " + ", ".join(record["element_sets"])

@@ -71,19 +71,36 @@ def _body_moduli(model) -> np.ndarray:
 
 
 def _body_edge_lengths(model, bodies=None) -> np.ndarray:
-    """(b,) float -- mean rest edge length of each body [m]: of its tet mesh, or without one (a model
-    from arrays) of the springs that start in it (their tet-edge springs if any), else of all springs."""
+    """(b,) float -- mean rest edge length of each body [m]: of its tet mesh; without one (a model from
+    arrays, or built from element sets) of the springs that start in it (their tet-edge springs if
+    any), or, for a model without springs (the ``"smoothed"`` rung), of the tet edges of its
+    continuum element sets."""
     if model.topology is not None:
         return (CollisionBodies.from_model(model) if bodies is None else bodies).mean_edge_lengths
-    edges = model.kinds == SPRING_KINDS.index("tet_edge")
-    if not edges.any():
-        edges = np.ones(model.spring_count, dtype=bool)
-    pairs, lengths = model.springs[edges], model.rest_lengths[edges]
+    if model.spring_count:
+        edges = model.kinds == SPRING_KINDS.index("tet_edge")
+        if not edges.any():
+            edges = np.ones(model.spring_count, dtype=bool)
+        pairs, lengths = model.springs[edges], model.rest_lengths[edges]
+    else:
+        pairs = _continuum_edges(model)
+        lengths = np.linalg.norm(np.diff(model.rest_positions[pairs], axis=1)[:, 0], axis=1)
     spring_body = model.node_body[pairs[:, 0]]
     count = np.bincount(spring_body, minlength=model.body_count)
     total = np.bincount(spring_body, weights=lengths, minlength=model.body_count)
     overall = lengths.mean() if len(lengths) else np.nan
     return np.where(count > 0, total / np.maximum(count, 1), overall)
+
+
+def _continuum_edges(model) -> np.ndarray:
+    """(E, 2) int -- the unique tet edges of a model's continuum element sets (the tets they are built on)."""
+    from meshing.mesh import TET_EDGES
+
+    tets = [element_set.kinematics.tets for element_set in model.elements if hasattr(element_set, "kinematics")]
+    if not tets:
+        return np.zeros((0, 2), dtype=np.int64)
+    pairs = np.concatenate(tets)[:, np.asarray(TET_EDGES)].reshape(-1, 2)
+    return np.unique(np.sort(pairs, axis=1), axis=0)
 
 
 class ContactForce(_PenaltyResponse):

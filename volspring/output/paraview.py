@@ -4,11 +4,14 @@ Layout of a series named ``NAME`` in ``directory``:
 
 ``NAME.pvd`` and ``NAME_0000.vtu``, ``NAME_0001.vtu``, ...
     the tet mesh at the deformed positions: point data ``displacement`` [m] and ``velocity``
-    [m/s], cell data ``volume_ratio`` (deformed / rest volume of each tet, < 0 when inverted).
+    [m/s], cell data ``volume_ratio`` (deformed / rest volume of each tet, < 0 when inverted) and
+    ``strain`` (|U - I|, the Frobenius norm of the tet's rotation-free Biot strain [-], U the
+    stretch of F = R U; the same on every rung of the ladder).
 ``NAME_springs.pvd`` and ``NAME_springs_0000.vtu``, ...
     every spring as a ``line`` cell over all nodes (shell nodes included): point data
     ``displacement`` and ``velocity``, cell data ``strain`` ((l - l0) / l0 [-]) and ``kind``
-    (index into :data:`volspring.SPRING_KINDS`).
+    (index into :data:`volspring.SPRING_KINDS`). Written for a model with springs only: the
+    ``"smoothed"`` rung has none, and its output is the tet series alone.
 
 Tets and springs are two series rather than one file of mixed cells because ParaView colours a
 mixed grid by one cell array covering every cell: a spring strain would need a made-up value on
@@ -36,7 +39,7 @@ import numpy as np
 from meshing._io import atomic_path
 from meshing.geometry import signed_tet_volumes
 
-__all__ = ["ParaViewWriter", "read_pvd", "write_pvd"]
+__all__ = ["ParaViewWriter", "read_pvd", "tet_strains", "write_pvd"]
 
 logger = logging.getLogger(__name__)
 
@@ -101,7 +104,8 @@ class ParaViewWriter:
     model : Model -- the model being simulated; the tet series needs ``model.topology``
         (a model built from arrays has springs only)
     name : str -- file name prefix (see the module docstring for the layout)
-    springs : bool -- also write the spring series (default True)
+    springs : bool, optional -- also write the spring series; default: when the model has springs
+        (True for a model without springs is refused: the series would be empty)
     first_frame : int -- resume an earlier series: keep its first ``first_frame`` frames (files
         and PVD entries) and write the next frame as number ``first_frame``; 0 (default) starts
         afresh. Raises if the existing PVD lists fewer frames.
@@ -128,18 +132,22 @@ class ParaViewWriter:
     (1, 'frame.pvd')
     """
 
-    def __init__(self, directory, model, *, name="frame", springs=True, first_frame=0, record=None):
+    def __init__(self, directory, model, *, name="frame", springs=None, first_frame=0, record=None):
         self.directory = Path(directory)
         self.model = model
         self.name = str(name)
         if not self.name or "/" in self.name or "\\" in self.name:
             raise ValueError(f"name = {name!r} must be a non-empty file name prefix without path separators")
         self.mesh = model.topology.mesh if model.topology is not None else None
-        self.springs = bool(springs)
+        self.springs = model.spring_count > 0 if springs is None else bool(springs)
+        if self.springs and not model.spring_count:
+            raise ValueError(f"springs=True, but the model has no springs (its rung is {model.rung!r}): the spring "
+                             "series would be empty; leave springs= out to write the tet series only")
         if self.mesh is None and not self.springs:
             raise ValueError("the model has no tet mesh (built from arrays) and springs=False: nothing to write")
         if self.mesh is not None:
             self._rest_volumes = self.mesh.tet_volumes
+            self._rest_inverses = _rest_inverses(self.mesh)
         self._record = record
         self.directory.mkdir(parents=True, exist_ok=True)
         self._entries = {"body": [], "springs": []}
@@ -248,9 +256,9 @@ class ParaViewWriter:
             files["body"] = self._write_vtu(
                 "body", x[:n], [("tetra", self.mesh.tets)],
                 point_data={"displacement": displacement[:n], "velocity": v[:n]},
-                cell_data={"volume_ratio": [ratio]})
+                cell_data={"volume_ratio": [ratio], "strain": [tet_strains(self.mesh.tets, self._rest_inverses, x)]})
         if self.springs:
-            strain = spring_strains(self.model, x) if self.model.spring_count else np.zeros(0)
+            strain = spring_strains(self.model, x)
             files["springs"] = self._write_vtu(
                 "springs", x, [("line", self.model.springs)],
                 point_data={"displacement": displacement, "velocity": v},
@@ -264,6 +272,38 @@ class ParaViewWriter:
             meshio.write(tmp, meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data),
                          file_format="vtu")
         return path
+
+
+def _rest_inverses(mesh) -> np.ndarray:
+    """(T, 3, 3) -- the inverse of each tet's rest edge matrix [x1 - x0, x2 - x0, x3 - x0] (a TetMesh has no flat tet)."""
+    corners = mesh.points[mesh.tets]
+    return np.linalg.inv(np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1)))
+
+
+def tet_strains(tets, rest_inverses, x) -> np.ndarray:
+    """(T,) float -- |U - I| of every tet at positions x: the norm of its Biot strain, free of rotation [-].
+
+    F = R U is each tet's deformation gradient (current edge matrix times ``rest_inverses``); an
+    inverted tet (det F < 0) counts its smallest stretch as negative, as the rotation-preserving
+    polar decomposition of the continuum rungs does (:func:`volspring.elements.tet_kinematics.corotational`),
+    so its strain is above 1.
+
+    >>> import numpy as np
+    >>> from meshing import TetMesh
+    >>> tet = TetMesh([[0., 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], [[0, 1, 2, 3]])
+    >>> turn = np.array([[0., -1, 0], [1, 0, 0], [0, 0, 1]])
+    >>> stretched = tet.points @ np.diag([1.1, 1.0, 1.0]) @ turn.T      # 10% stretch, then a rotation
+    >>> tet_strains(tet.tets, _rest_inverses(tet), stretched).round(12).tolist()
+    [0.1]
+    """
+    x = np.asarray(x, dtype=np.float64)
+    if not len(tets):
+        return np.zeros(0)
+    corners = x[tets]
+    F = np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1)) @ rest_inverses
+    stretches = np.linalg.svd(F, compute_uv=False)
+    stretches[:, 2] *= np.where(np.linalg.det(F) < 0, -1.0, 1.0)
+    return np.sqrt(((stretches - 1.0) ** 2).sum(axis=1))
 
 
 def _checked_state(state, node_count, frame):

@@ -71,6 +71,9 @@ logger = logging.getLogger(__name__)
 
 #: Files a desktop drops into folders it shows; they do not make a folder "not empty".
 DESKTOP_FILES = frozenset({".DS_Store", "Thumbs.db", "desktop.ini"})
+#: The entries of a manifest that :meth:`RunFolder.note` may not replace.
+_LAYOUT_KEYS = frozenset({"format", "version", "command", "started", "ended", "status", "pid", "host", "volspring",
+                          "earlier", "files"})
 #: How a caller's user asks for each option, for refusal messages (a CLI passes its own flags).
 DEFAULT_FLAGS = {"overwrite": "overwrite=True", "resume": "resume=True"}
 
@@ -302,6 +305,35 @@ class RunFolder:
         if relative.as_posix() == MANIFEST_NAME:
             raise ValueError(f"{path} is the run manifest; it is not an output to record")
         return relative.as_posix()
+
+    def note(self, key: str, value) -> None:
+        """Record what the run is beside its files, e.g. ``note("model", {"rung": "smoothed", ...})``.
+
+        Parameters
+        ----------
+        key : str
+            A manifest entry of the run's own (not one of the manifest's layout: ``files``,
+            ``command``, ``status``, ...).
+        value : JSON-serialisable
+            Replaces an earlier note of the same key.
+
+        Raises
+        ------
+        ValueError
+            For a key of the manifest's layout, or a value JSON cannot hold.
+        RuntimeError
+            After :meth:`finish`.
+        """
+        if key in _LAYOUT_KEYS or not isinstance(key, str):
+            raise ValueError(f"note key {key!r} is part of the run manifest's layout; choose another name")
+        if self.status != "running":
+            raise RuntimeError(f"the run in {self.path} is {self.status}: it cannot note {key!r}")
+        try:
+            json.dumps(value)
+        except (TypeError, ValueError) as error:
+            raise ValueError(f"note {key!r}: {error}") from None
+        self._manifest[key] = value
+        self._write()
 
     # ------------------------------------------------------------------ ending
     def finish(self, status: str = "finished") -> None:

@@ -13,6 +13,9 @@ Manifest layout (JSON)::
      "pid": 4711, "host": "lab-3", "volspring": "0.4.0",
      "earlier": [],                  # the sessions a resumed run continues: command, started, ended, status
      "files": ["frame.pvd", "frame_0000.vtu", ...]}                # relative to the folder, POSIX separators
+
+A run may add entries of its own (:meth:`RunFolder.note <volspring.output.RunFolder.note>`): ``volspring-sim``
+records its model as ``"model": {"rung": "smoothed", "alpha": 0.6, "E": ..., "nu": ..., ...}``.
 """
 
 from __future__ import annotations
