@@ -113,7 +113,9 @@ def corotational(F, *, project=True):
             # c = 2 / (s_i + s_j) <= 1 keeps 1 - c >= 0; s_i + s_j <= 0 (inverted) also clamps to 1.
             coefficients[:, r] = np.where(total > 2.0, 2.0 / np.where(total > 2.0, total, 1.0), 1.0)
         else:
-            coefficients[:, r] = 2.0 / total
+            # At s_i + s_j = 0 (a tet reflected in the twist plane) R jumps and the Hessian does not
+            # exist: take the projected value there rather than an infinite one.
+            coefficients[:, r] = np.divide(2.0, total, out=np.ones_like(total), where=total != 0.0)
     return psi, P, twists, coefficients
 
 
