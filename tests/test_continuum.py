@@ -283,3 +283,33 @@ def test_damping_ratio_damps_the_highest_mode_by_zeta(cube):
     undamped = energy_after(Model.from_mesh(cube, material, model="smoothed"))
     # Measured 0.78 after 50 steps; without damping the ratio is 1 up to the shadow energy's O(h omega) wobble.
     assert energy_after(damped) < 0.9 * undamped
+
+
+def test_fast_rotation_preserving_svd_agrees_with_lapack():
+    """The Jacobi path (well-conditioned F) and the LAPACK fallback (inverted, flat, ill-conditioned) both give
+    F = U diag(s) V^T with rotations U, V and the same rotation U V^T and sorted |s| as numpy's SVD."""
+    from volspring.elements.tet_kinematics import rotation_preserving_svd
+
+    rng = np.random.default_rng(7)
+    turn = np.linalg.qr(rng.standard_normal((3, 3)))[0]
+    turn *= np.sign(np.linalg.det(turn))
+    F = np.concatenate([
+        np.eye(3)[None] + 0.3 * rng.standard_normal((400, 3, 3)),  # large strains, some inverted
+        np.eye(3)[None] + 1e-6 * rng.standard_normal((50, 3, 3)),  # near rest
+        np.broadcast_to(turn, (5, 3, 3)),                          # rigid rotation: repeated s = 1
+        np.broadcast_to(np.diag([2.0, 2.0, 0.5]), (5, 3, 3)),      # a repeated pair
+        np.broadcast_to(np.diag([1.0, 1.0, 1e-4]), (5, 3, 3)),     # nearly flat: the fallback
+        np.broadcast_to(np.diag([1.0, 1.0, -0.5]), (5, 3, 3)),     # inverted: the fallback
+        np.zeros((2, 3, 3)),                                       # collapsed to a point
+    ])
+    U, s, Vt = rotation_preserving_svd(F)
+    # Rounding: the Jacobi path works on F^T F, at most 1e4 eps relative (condition <= 100 there).
+    scale = np.abs(F).max(axis=(1, 2), keepdims=True) + 1.0
+    assert np.abs(U * s[:, None, :] @ Vt - F).max() < 1e-11 * scale.max()
+    for Q in (U, np.swapaxes(Vt, 1, 2)):
+        assert np.abs(np.swapaxes(Q, 1, 2) @ Q - np.eye(3)).max() < 1e-12
+        assert np.allclose(np.linalg.det(Q), 1.0, atol=1e-12)
+    reference = np.sort(np.linalg.svd(F, compute_uv=False), axis=1)
+    assert np.allclose(np.sort(np.abs(s), axis=1), reference, rtol=0, atol=1e-12)
+    inverted = np.linalg.det(F) < 0
+    assert ((s < 0).sum(axis=1) == inverted).all()  # one negative singular value exactly where F is inverted

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring._deprecation import deprecated_alias
+from volspring.elements.base import BlockMap
 from volspring.errors import SpringCollapsed
 
 __all__ = ["BlockPattern", "ModelLinearization", "eliminate_held", "held_unknowns", "stiffness_matrix"]
@@ -63,6 +64,7 @@ class _Part:
     order: np.ndarray | None  # model element of each evaluated element when renumbered, else None
     summation: sp.csr_matrix = None  # (nnzb, e b): block data = summation @ blocks.reshape(-1, 9)
     coupling: tuple = ()  # (rows, cols, owner, sign): free row, fixed column, block, sign
+    operator: bool = False  # applied as a product; ``summation`` places its preconditioner stand-in
 
     @property
     def local(self) -> bool:
@@ -99,6 +101,9 @@ class BlockPattern:
     free : (n,) bool, optional -- nodes that are unknowns; all nodes when omitted
     ordering : {"rcm", "natural"} -- numbering of the free nodes: reverse Cuthill-McKee on the
         graph of the stencils (for cache locality, see :meth:`_reorder`) or increasing node index
+    matrix_free : bool -- element sets that offer it (:attr:`volspring.elements.ElementSet.matrix_free`)
+        are applied as products (:meth:`operator`) instead of assembled: the pattern holds their
+        sparser preconditioner stand-in, which :meth:`matrix` adds with ``preconditioner=True``
 
     Attributes
     ----------
@@ -121,7 +126,7 @@ class BlockPattern:
     array([ 3.,  0.,  0., -1.])
     """
 
-    def __init__(self, model, free=None, *, ordering="rcm"):
+    def __init__(self, model, free=None, *, ordering="rcm", matrix_free=False):
         n = model.node_count
         free = np.ones(n, dtype=bool) if free is None else np.asarray(free, dtype=bool)
         if free.shape != (n,):
@@ -131,6 +136,7 @@ class BlockPattern:
         self.model = model
         self.free = free.copy()
         self.ordering = ordering
+        self.matrix_free = bool(matrix_free)
         self.free_nodes = np.flatnonzero(free)
         self.node_index = np.full(n, -1, dtype=np.int64)
         self.node_index[self.free_nodes] = np.arange(len(self.free_nodes))
@@ -148,13 +154,18 @@ class BlockPattern:
         # (row, col, owner, sign) of every block contribution of every set, in local numbering.
         self.parts, entries = [], []
         for element_set in model.elements:
-            renumbered = element_set.renumbered(self.node_rank)
-            if renumbered is None:
-                part, stencil = _Part(element_set, None), self.node_rank[element_set.stencil]
+            if self._applied(element_set):
+                part = _Part(element_set, None, operator=True)
+                stencil = self.node_rank[element_set.preconditioner_stencil]
+                layout = BlockMap.full(stencil.shape[1])
             else:
-                part = _Part(*renumbered)
-                stencil = part.element_set.stencil
-            layout = element_set.block_map
+                renumbered = element_set.renumbered(self.node_rank)
+                if renumbered is None:
+                    part, stencil = _Part(element_set, None), self.node_rank[element_set.stencil]
+                else:
+                    part = _Part(*renumbered)
+                    stencil = part.element_set.stencil
+                layout = element_set.block_map
             e = len(stencil)
             rows, cols = stencil[:, layout.row].ravel(), stencil[:, layout.column].ravel()
             owner = (np.arange(e)[:, None] * layout.block_count + layout.block[None, :]).ravel()
@@ -184,6 +195,15 @@ class BlockPattern:
         # Flat positions of the diagonal entries of the diagonal blocks in the data array.
         self.diagonal_entries = (9 * self.diagonal_blocks[:, None] + np.array([0, 4, 8])).ravel()
 
+    def _applied(self, element_set) -> bool:
+        """Whether ``element_set`` is applied as a product here rather than assembled."""
+        return self.matrix_free and getattr(element_set, "matrix_free", False)
+
+    @property
+    def has_operator(self) -> bool:
+        """Whether some element set is applied as a product (see :meth:`operator`)."""
+        return any(part.operator for part in self.parts)
+
     def _reorder(self):
         """Number the free nodes by reverse Cuthill-McKee on the graph of the element stencils.
 
@@ -196,7 +216,11 @@ class BlockPattern:
         f = len(self.free_nodes)
         rows, cols = [], []
         for element_set in self.model.elements:
-            layout, stencil = element_set.block_map, self.node_index[element_set.stencil]
+            if self._applied(element_set):
+                stencil = self.node_index[element_set.preconditioner_stencil]
+                layout = BlockMap.full(stencil.shape[1])
+            else:
+                layout, stencil = element_set.block_map, self.node_index[element_set.stencil]
             off = layout.row != layout.column
             a, b = stencil[:, layout.row[off]].ravel(), stencil[:, layout.column[off]].ravel()
             both = (a >= 0) & (b >= 0)
@@ -234,7 +258,11 @@ class BlockPattern:
                        clamp_compression=clamp_compression)
         forces, parts = np.zeros((self.model.node_count, 3)), []
         for part in self.parts:
-            if part.local:
+            if part.operator:
+                linearization = part.element_set.linearize_operator(x, v, stiffness_scale=stiffness_scale,
+                                                                   damping_scale=damping_scale)
+                forces += linearization.forces
+            elif part.local:
                 try:
                     linearization = part.element_set.linearize(
                         x[self.node_order], None if v is None else v[self.node_order], **options)
@@ -258,7 +286,7 @@ class BlockPattern:
                 out += lin.dfdx_times(u)
         return out
 
-    def data(self, linearization, diagonal=None, *, out=None) -> np.ndarray:
+    def data(self, linearization, diagonal=None, *, out=None, preconditioner=False) -> np.ndarray:
         """The BSR data array, (nnzb, 3, 3), for the given blocks.
 
         Parameters
@@ -267,12 +295,16 @@ class BlockPattern:
         diagonal : (f,) or (f, 3) or (f, 3, 3) float, optional -- added to the diagonal block of
             each free node: a scalar times I (e.g. the masses), a diagonal, or a full block
         out : (nnzb, 3, 3) float, optional -- written in place
+        preconditioner : bool -- add the stand-in blocks of the sets applied as products (the
+            matrix to build a preconditioner from); without it they add nothing (see :meth:`operator`)
         """
         blocks = [linearization] if isinstance(linearization, np.ndarray) else \
-            [lin.blocks for lin in linearization.parts]
+            [lin.blocks if not part.operator else lin.preconditioner_blocks() if preconditioner else None
+             for part, lin in zip(self.parts, linearization.parts)]
         if len(blocks) != len(self.parts):
             raise ValueError(f"{len(blocks)} block arrays for a model with {len(self.parts)} element sets")
-        products = (part.summation @ np.reshape(part_blocks, (-1, 9)) for part, part_blocks in zip(self.parts, blocks))
+        products = (part.summation @ np.reshape(part_blocks, (-1, 9))
+                    for part, part_blocks in zip(self.parts, blocks) if part_blocks is not None)
         data = next(products, None)
         data = np.zeros((self.block_count, 9)) if data is None else data
         for product in products:
@@ -292,9 +324,30 @@ class BlockPattern:
             return out
         return data
 
-    def matrix(self, linearization, diagonal=None) -> sp.bsr_matrix:
-        """(3f, 3f) BSR matrix with block size 3 sharing this pattern's index arrays."""
-        return self.wrap(self.data(linearization, diagonal))
+    def matrix(self, linearization, diagonal=None, *, preconditioner=False) -> sp.bsr_matrix:
+        """(3f, 3f) BSR matrix with block size 3 sharing this pattern's index arrays (``preconditioner``:
+        see :meth:`data`)."""
+        return self.wrap(self.data(linearization, diagonal, preconditioner=preconditioner))
+
+    def operator(self, linearization):
+        """The sets applied as products, over the free unknowns: a ``scipy.sparse.linalg.LinearOperator``
+        p -> (c_K K + c_D C) p (None when every set is assembled). The system is ``matrix + operator``."""
+        from scipy.sparse.linalg import LinearOperator
+
+        applied = [lin for part, lin in zip(self.parts, linearization.parts) if part.operator]
+        if not applied:
+            return None
+        n = self.model.node_count
+
+        def times(p):
+            u = np.zeros((n, 3))
+            u[self.free_nodes] = np.reshape(p, (-1, 3))
+            total = applied[0].scaled_times(u)
+            for lin in applied[1:]:
+                total += lin.scaled_times(u)
+            return self.restrict(total)
+
+        return LinearOperator((self.size, self.size), matvec=times, rmatvec=times, dtype=np.float64)
 
     def wrap(self, data) -> sp.bsr_matrix:
         """A BSR matrix around a data array of this pattern (no copy, no format check)."""
@@ -325,13 +378,20 @@ class BlockPattern:
         out = np.zeros((self.model.node_count, 3))
         for part, part_blocks in zip(self.parts, blocks):
             rows, cols, owner, sign = part.coupling
-            if rows.size == 0:
+            if rows.size == 0 or part.operator:
                 continue
             flat = np.reshape(part_blocks, (-1, 3, 3))
             contribution = np.einsum("eab,eb->ea", flat[owner], u[cols]) * sign[:, None]
             for c in range(3):
                 out[:, c] -= np.bincount(rows, weights=contribution[:, c], minlength=len(out))
-        return out[self.node_rank]
+        out = out[self.node_rank]
+        if self.has_operator:
+            fixed = prescribed.copy()
+            fixed[self.free_nodes] = 0.0
+            for part, lin in zip(self.parts, linearization.parts):
+                if part.operator:
+                    out -= lin.scaled_times(fixed)
+        return out
 
 
 def stiffness_matrix(model, x=None, *, free=None, clamp_compression=True) -> sp.csr_matrix:

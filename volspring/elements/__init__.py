@@ -6,9 +6,9 @@ its stencil) and how assembly uses it. Built in: :class:`Springs` (edge springs 
 nodal volume preservation, :mod:`volspring.elements.continuum`).
 """
 
-from volspring.elements.base import BlockMap, ElementSet, Linearization
+from volspring.elements.base import BlockMap, ElementSet, Linearization, OperatorLinearization
 from volspring.elements.continuum import CorotatedTets, NodalStrain
 from volspring.elements.springs import SpringLinearization, Springs
 
-__all__ = ["BlockMap", "CorotatedTets", "ElementSet", "Linearization", "NodalStrain", "SpringLinearization",
-           "Springs"]
+__all__ = ["BlockMap", "CorotatedTets", "ElementSet", "Linearization", "NodalStrain", "OperatorLinearization",
+           "SpringLinearization", "Springs"]

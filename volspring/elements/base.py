@@ -35,7 +35,7 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["BlockMap", "ElementSet", "Linearization"]
+__all__ = ["BlockMap", "ElementSet", "Linearization", "OperatorLinearization"]
 
 
 @dataclass(frozen=True)
@@ -83,6 +83,37 @@ class Linearization:
         return -_block_product(self.element_set, self.stiffness, u)
 
 
+class OperatorLinearization(Linearization):
+    """Forces of a matrix-free element set at one configuration, and its stiffness as a product.
+
+    The implicit solve applies ``c_K K + c_D C`` through :meth:`scaled_times` inside CG instead of
+    assembling it, and builds its preconditioner from :meth:`preconditioner_blocks`, a sparser stand-in
+    on the set's ``preconditioner_stencil`` (see :attr:`ElementSet.matrix_free`).
+
+    Parameters
+    ----------
+    forces : (n, 3) float -- the set's forces [N]
+    times : callable -- ``times(u) -> K u`` for (n, 3) u [N]
+    scale : float -- c_K + c_D b: the product's factor in the system (Rayleigh damping C = b K)
+    element_set : ElementSet
+    preconditioner : callable -- ``preconditioner() -> (e, b, 3, 3)`` stand-in blocks, already scaled
+    """
+
+    def __init__(self, forces, times, scale, element_set, preconditioner):
+        super().__init__(forces, None, None, element_set)
+        self._times, self.scale, self._preconditioner = times, float(scale), preconditioner
+
+    def dfdx_times(self, u) -> np.ndarray:
+        return -self._times(u)
+
+    def scaled_times(self, u) -> np.ndarray:
+        """(n, 3) float -- (c_K K + c_D C) u."""
+        return self.scale * self._times(u)
+
+    def preconditioner_blocks(self) -> np.ndarray:
+        return self._preconditioner()
+
+
 def _block_product(element_set, blocks, u) -> np.ndarray:
     """(n, 3) float -- (the assembled blocks) @ u, scattered to the nodes."""
     layout, stencil = element_set.block_map, element_set.stencil
@@ -108,6 +139,11 @@ class ElementSet(ABC):
     """
 
     name: str = ""
+    #: A set whose blocks are many and cheap to apply without assembling (a smoothed nodal term couples
+    #: each node's 2-ring) says so here and gives ``linearize_operator(x, v, *, stiffness_scale,
+    #: damping_scale)`` (an :class:`OperatorLinearization`) and ``preconditioner_stencil``; the implicit
+    #: solve then applies its stiffness as a product and preconditions with the stand-in blocks.
+    matrix_free: bool = False
 
     @property
     @abstractmethod

@@ -35,7 +35,7 @@ from functools import cached_property
 
 import numpy as np
 
-from volspring.elements.base import BlockMap, ElementSet, Linearization
+from volspring.elements.base import BlockMap, ElementSet, Linearization, OperatorLinearization
 from volspring.elements.tet_kinematics import SmoothingDomains, TetGradients, corotational
 from volspring.material import _real_array, _real_number
 
@@ -77,7 +77,40 @@ def _hessian_times(twists, coefficients, dF):
     return dF - np.einsum("mr,mrij->mij", projections, twists)
 
 
-class CorotatedTets(ElementSet):
+class _TetContinuum(ElementSet):
+    """What the continuum sets share: Rayleigh stiffness damping, and the matrix-free protocol on the tets
+    (:attr:`ElementSet.matrix_free`: the implicit solve applies the stiffness as a product and builds its
+    preconditioner from :meth:`preconditioner_blocks` on the tets' 1-ring)."""
+
+    matrix_free = True
+
+    @property
+    def preconditioner_stencil(self) -> np.ndarray:
+        """(T, 4) int -- the tets: the stand-in blocks of :meth:`preconditioner_blocks` couple the 1-ring only."""
+        return self.kinematics.tets
+
+    def damping_blocks(self, x) -> np.ndarray | None:
+        if not self.stiffness_damping:
+            return None
+        return self.stiffness_damping * self.stiffness_blocks(x)
+
+    def _scale(self, stiffness_scale, damping_scale) -> float:
+        """c_K + c_D b: the factor of K in the system (the damping blocks are b K)."""
+        return stiffness_scale + damping_scale * self.stiffness_damping
+
+    def _operator(self, forces, times, x, stiffness_scale, damping_scale) -> OperatorLinearization:
+        scale = self._scale(stiffness_scale, damping_scale)
+        return OperatorLinearization(forces, times, scale, self, lambda: scale * self.preconditioner_blocks(x))
+
+    def with_stiffness_damping(self, b):
+        """A copy with Rayleigh stiffness damping b [s] (the kinematics and domains are shared)."""
+        copy = object.__new__(type(self))
+        copy.__dict__.update(self.__dict__)
+        copy.stiffness_damping = _damping_time(b)
+        return copy
+
+
+class CorotatedTets(_TetContinuum):
     """Per-tet corotational shear energy ``V_t mu_t |F_t - R_t|^2`` (see the module docstring).
 
     Parameters
@@ -107,6 +140,15 @@ class CorotatedTets(ElementSet):
         self.shear = _per_tet("shear", shear, len(self.kinematics.tets))
         self.stiffness_damping = _damping_time(stiffness_damping)
 
+    @classmethod
+    def from_kinematics(cls, kinematics, node_count, shear, *, stiffness_damping=0.0) -> "CorotatedTets":
+        """The set on tets whose :class:`TetGradients` are already computed (shared, not copied)."""
+        tets = object.__new__(cls)
+        tets.node_count, tets.kinematics = int(node_count), kinematics
+        tets.shear = _per_tet("shear", shear, len(kinematics.tets))
+        tets.stiffness_damping = _damping_time(stiffness_damping)
+        return tets
+
     @property
     def stencil(self) -> np.ndarray:
         return self.kinematics.tets
@@ -119,8 +161,7 @@ class CorotatedTets(ElementSet):
         return float(self._weights() @ psi)
 
     def _forces_from(self, P):
-        stress = self._weights()[:, None, None] * P
-        return -self.kinematics.scatter(np.einsum("tij,taj->tai", stress, self.kinematics.gradients), self.node_count)
+        return -self.kinematics.spread(self._weights()[:, None, None] * P, self.node_count)
 
     def forces(self, x, v=None) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
@@ -150,34 +191,42 @@ class CorotatedTets(ElementSet):
                                                   project=clamp_compression)
         return self._blocks(twists, coefficients).reshape(-1, 16, 3, 3)
 
-    def damping_blocks(self, x) -> np.ndarray | None:
-        if not self.stiffness_damping:
-            return None
-        return self.stiffness_damping * self.stiffness_blocks(x)
-
     def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0, clamp_compression=True):
         x = np.asarray(x, dtype=np.float64)
         F = self.kinematics.deformation(x)
         _, P, twists, coefficients = corotational(F, project=clamp_compression)
         forces = self._forces_from(P)
         stiffness = self._blocks(twists, coefficients).reshape(-1, 16, 3, 3)
-        scale = stiffness_scale
-        if self.stiffness_damping:
-            if v is not None:
-                projected = corotational(F)[2:] if not clamp_compression else (twists, coefficients)
-                forces += self._damping_forces(*projected, v)
-            scale = stiffness_scale + damping_scale * self.stiffness_damping
-        return Linearization(forces, scale * stiffness, stiffness, self)
+        if v is not None and self.stiffness_damping:
+            projected = corotational(F)[2:] if not clamp_compression else (twists, coefficients)
+            forces += self._damping_forces(*projected, v)
+        return Linearization(forces, self._scale(stiffness_scale, damping_scale) * stiffness, stiffness, self)
 
-    def with_stiffness_damping(self, b) -> "CorotatedTets":
-        """A copy with Rayleigh stiffness damping b [s]."""
-        return _with_damping(self, b)
+    # ------------------------------------------------------------------ matrix-free
+    def preconditioner_blocks(self, x) -> np.ndarray:
+        """(T, 16, 3, 3) -- the projected stiffness blocks themselves (already on the 1-ring)."""
+        return self.stiffness_blocks(x)
+
+    def linearize_operator(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0):
+        """Forces at (x, v) and the projected stiffness as a product (:class:`OperatorLinearization`):
+        K u = spread(2 V_t mu_t H_t : dF_t(u)), three sparse products and the twist projection per tet."""
+        x = np.asarray(x, dtype=np.float64)
+        _, P, twists, coefficients = corotational(self.kinematics.deformation(x))
+        forces = self._forces_from(P)
+        if v is not None and self.stiffness_damping:
+            forces += self._damping_forces(twists, coefficients, v)
+
+        def times(u):
+            dF = self.kinematics.deformation(np.asarray(u, dtype=np.float64))
+            return -self._forces_from(2.0 * _hessian_times(twists, coefficients, dF))
+
+        return self._operator(forces, times, x, stiffness_scale, damping_scale)
 
     def __repr__(self) -> str:
         return f"CorotatedTets({self.element_count} tets, b={self.stiffness_damping:g} s)"
 
 
-class NodalStrain(ElementSet):
+class NodalStrain(_TetContinuum):
     """Smoothed nodal shear and volume energy on the smoothing domains of a tet mesh (module docstring).
 
     Parameters
@@ -204,6 +253,8 @@ class NodalStrain(ElementSet):
     """
 
     name = "nodal strain"
+    #: Weight of the per-tet volume term in the preconditioner's stand-in (see :meth:`preconditioner_blocks`).
+    PRECONDITIONER_BULK = 1.0
 
     def __init__(self, rest_positions, tets, shear, bulk, *, regions=None, stiffness_damping=0.0):
         rest = np.asarray(rest_positions, dtype=np.float64)
@@ -287,7 +338,9 @@ class NodalStrain(ElementSet):
     def _forces(self, state):
         pressure = self.bulk * (state["J"] - 1.0)
         mean_pressure = pressure[self.domains.corner_domain].mean(axis=1)
-        forces = -self.kinematics.scatter(mean_pressure[:, None, None] * self._volume_gradients(state), self.node_count)
+        # dv_t/dx_a = V_t cof(F_t) g_ta: the pressure forces spread V_t pbar_t cof(F_t) like a stress.
+        weights = mean_pressure * self.kinematics.volumes
+        forces = -self.kinematics.spread(weights[:, None, None] * state["cof"], self.node_count)
         if "P" in state:
             forces -= self.domains.spread((self.shear * self.domains.volumes)[:, None, None] * state["P"])
         return forces
@@ -307,12 +360,17 @@ class NodalStrain(ElementSet):
     def _stiffness_times(self, state, u):
         """(n, 3) -- K u with the projected K at ``state``, without forming K."""
         domains = self.domains
-        w = self._ring_volume_gradients(state)
-        rate = np.bincount(domains.ring_domain, weights=np.einsum("ri,ri->r", w, u[domains.ring_node]),
-                           minlength=domains.domain_count)
-        coefficient = (self.bulk / domains.volumes * rate)[domains.ring_domain]
-        result = np.stack([np.bincount(domains.ring_node, weights=coefficient * w[:, c], minlength=self.node_count)
-                           for c in range(3)], axis=1)
+        W = state.get("volume_rows")
+        if W is None:  # kept in the state: CG applies the product many times at one state
+            import scipy.sparse as sp
+
+            indices, indptr = domains.volume_layout
+            W = sp.csr_matrix((self._ring_volume_gradients(state).ravel(), indices, indptr),
+                              shape=(domains.domain_count, 3 * self.node_count))
+            state["volume_rows"] = W, W.T.tocsr()
+        W, Wt = state["volume_rows"]
+        rate = W @ u.ravel()  # dv_d = sum_a (dv_d/dx_a) . u_a
+        result = (Wt @ (self.bulk / domains.volumes * rate)).reshape(-1, 3)
         if "P" in state:
             dP = 2.0 * _hessian_times(state["twists"], state["coefficients"], domains.averaged(u))
             result += domains.spread((self.shear * domains.volumes)[:, None, None] * dP)
@@ -365,42 +423,62 @@ class NodalStrain(ElementSet):
         state = self._state(np.asarray(x, dtype=np.float64), clamp_compression)
         return self._blocks(state, not clamp_compression)
 
-    def damping_blocks(self, x) -> np.ndarray | None:
-        if not self.stiffness_damping:
-            return None
-        return self.stiffness_damping * self.stiffness_blocks(x)
-
     def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0, clamp_compression=True):
         x = np.asarray(x, dtype=np.float64)
         state = self._state(x, clamp_compression)
         forces = self._forces(state)
         stiffness = self._blocks(state, not clamp_compression)
-        scale = stiffness_scale
-        if self.stiffness_damping:
-            if v is not None:
-                damped = state if clamp_compression else self._state(x, True)
-                forces -= self.stiffness_damping * self._stiffness_times(damped, np.asarray(v, dtype=np.float64))
-            scale = stiffness_scale + damping_scale * self.stiffness_damping
-        return Linearization(forces, scale * stiffness, stiffness, self)
+        if v is not None and self.stiffness_damping:
+            damped = state if clamp_compression else self._state(x, True)
+            forces -= self.stiffness_damping * self._stiffness_times(damped, np.asarray(v, dtype=np.float64))
+        return Linearization(forces, self._scale(stiffness_scale, damping_scale) * stiffness, stiffness, self)
+
+    # ------------------------------------------------------------------ matrix-free
+    @cached_property
+    def _tet_shear(self):
+        """Per tet, the shear and bulk coefficient of its region's domains."""
+        corner = self.domains.corner_domain[:, 0]
+        return CorotatedTets.from_kinematics(self.kinematics, self.node_count, self.shear[corner]), self.bulk[corner]
+
+    def preconditioner_blocks(self, x) -> np.ndarray:
+        """(T, 16, 3, 3) -- a 1-ring stand-in for the projected stiffness, to build a preconditioner from.
+
+        Per tet, the corotated shear ``V_t mu |F_t - R_t|^2`` and the Gauss-Newton part of a per-tet
+        volume term ``(c kappa / 2) V_t (J_t - 1)^2`` (c = :attr:`PRECONDITIONER_BULK`), with the
+        domains' mu and kappa. By convexity (Fbar is a mean of F_t) the per-tet shear bounds the
+        smoothed one from above, so the stand-in is stiffer in shear; the per-tet volume term is stiffer
+        in the volumetric modes that the nodal term leaves soft (that is what locking is), which only
+        costs CG iterations. It has the springs' sparsity (a sixth of the 2-ring's 3x3 blocks): on a
+        3,321-node beam at nu 0.45, dt 0.01 s, an AMG hierarchy built from it needed 13 CG iterations
+        to rtol 1e-3 where one built from the exact 2-ring matrix needed 7, at a quarter of the cost
+        per V-cycle (c = 0: 21 iterations, 0.2: 15).
+        """
+        x = np.asarray(x, dtype=np.float64)
+        tets, bulk = self._tet_shear
+        blocks = tets.stiffness_blocks(x)
+        state = {"cof": _cofactor(self.kinematics.deformation(x))}
+        w = self._volume_gradients(state)  # (T, 4, 3) dv_t / dx_a
+        w = w * np.sqrt(self.PRECONDITIONER_BULK * bulk / self.kinematics.volumes)[:, None, None]
+        blocks += (w[:, :, None, :, None] * w[:, None, :, None, :]).reshape(-1, 16, 3, 3)
+        return blocks
+
+    def linearize_operator(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0):
+        """Forces at (x, v) and the projected stiffness as a product (:class:`OperatorLinearization`)."""
+        x = np.asarray(x, dtype=np.float64)
+        state = self._state(x, True)
+        forces = self._forces(state)
+        if v is not None and self.stiffness_damping:
+            forces -= self.stiffness_damping * self._stiffness_times(state, np.asarray(v, dtype=np.float64))
+        return self._operator(forces, lambda u: self._stiffness_times(state, np.asarray(u, dtype=np.float64)), x,
+                              stiffness_scale, damping_scale)
 
     def volume_ratios(self, x) -> np.ndarray:
         """(d,) float -- J_d = v_d / V_d of every smoothing domain at positions x."""
         return self._state(np.asarray(x, dtype=np.float64), True)["J"]
 
-    def with_stiffness_damping(self, b) -> "NodalStrain":
-        """A copy with Rayleigh stiffness damping b [s] (the domains are shared)."""
-        return _with_damping(self, b)
-
     def __repr__(self) -> str:
         return (f"NodalStrain({self.domains.domain_count} domains, {self.element_count} ring pairs, "
                 f"b={self.stiffness_damping:g} s)")
-
-
-def _with_damping(element_set, b):
-    copy = object.__new__(type(element_set))
-    copy.__dict__.update(element_set.__dict__)
-    copy.stiffness_damping = _damping_time(b)
-    return copy
 
 
 def _cofactor(F) -> np.ndarray:

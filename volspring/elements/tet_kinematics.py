@@ -25,7 +25,7 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["SmoothingDomains", "TetGradients", "corotational", "domain_pairs"]
+__all__ = ["SmoothingDomains", "TetGradients", "corotational", "domain_pairs", "rotation_preserving_svd"]
 
 _TWIST_PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -68,15 +68,125 @@ class TetGradients:
         gradients[:, 0] = -inverse.sum(axis=1)
         return cls(tets, volumes, gradients)
 
+    @cached_property
+    def _columns(self):
+        """Three (T, n) CSR matrices G_j with rows g_t.[j] on each tet's corners, and their transposes (CSR):
+        F_t[:, j] = (G_j x)_t. Sparse products gather and scatter several times faster than einsum over
+        x[tets] and bincount (0.5 ms against 4.5 ms for F on 15,360 tets)."""
+        import scipy.sparse as sp
+
+        T = len(self.tets)
+        shape = (T, int(self.tets.max()) + 1 if T else 0)
+        indptr = np.arange(0, 4 * T + 1, 4)
+        matrices = tuple(sp.csr_matrix((self.gradients[:, :, j].ravel(), self.tets.ravel(), indptr), shape=shape)
+                         for j in range(3))
+        return matrices, tuple(matrix.T.tocsr() for matrix in matrices)
+
     def deformation(self, x) -> np.ndarray:
         """(T, 3, 3) float -- F_t at positions x."""
-        return np.einsum("tai,taj->tij", x[self.tets], self.gradients)
+        x = np.asarray(x, dtype=np.float64)
+        matrices, _ = self._columns
+        if len(x) < matrices[0].shape[1]:
+            raise ValueError(f"positions have {len(x)} rows; the tets index node {matrices[0].shape[1] - 1}")
+        x = x[:matrices[0].shape[1]]
+        return np.stack([G @ x for G in matrices], axis=2)
 
-    def scatter(self, per_corner, node_count) -> np.ndarray:
-        """(n, 3) float -- the sum over tets of (T, 4, 3) per-corner vectors, by node."""
-        nodes = self.tets.ravel()
-        flat = per_corner.reshape(-1, 3)
-        return np.stack([np.bincount(nodes, weights=flat[:, c], minlength=node_count) for c in range(3)], axis=1)
+    def spread(self, stress, node_count) -> np.ndarray:
+        """(n, 3) float -- sum_t stress_t g_ta per node a, for (T, 3, 3) ``stress`` (the transpose of
+        :meth:`deformation`: a tet set's forces are ``-spread(V_t P_t)``)."""
+        _, transposed = self._columns
+        out = np.zeros((node_count, 3))
+        if len(self.tets):
+            out[:transposed[0].shape[0]] = sum(Gt @ np.ascontiguousarray(stress[:, :, j])
+                                               for j, Gt in enumerate(transposed))
+        return out
+
+
+#: Condition number sigma_max / sigma_min above which :func:`rotation_preserving_svd` hands an F to LAPACK:
+#: the Jacobi path works on F^T F, whose rounding grows as the square of it (1e4 eps = 2e-12 here).
+_JACOBI_CONDITION = 100.0
+_JACOBI_SWEEPS = 4  # quadratic convergence: 10% random strains reach off-diagonals of 1e-22 in 4 sweeps
+_JACOBI_MAX_SWEEPS = 8
+_JACOBI_ROTATIONS = ((0, 1, 2), (0, 2, 1), (1, 2, 0))
+
+
+def _symmetric(i, j):
+    return (i, j) if i <= j else (j, i)
+
+
+def _jacobi_eigh(C, sweeps=_JACOBI_SWEEPS):
+    """Eigenvalues (m, 3) and eigenvectors (m, 3, 3) of symmetric 3x3 matrices by cyclic Jacobi rotations,
+    and whether each converged (off-diagonal below 1e-15 of the trace).
+
+    The entries are kept as separate contiguous arrays (one per matrix entry), so each rotation is a few
+    dozen vector operations over all m matrices: about eight times faster than ``np.linalg.eigh`` or
+    ``np.linalg.svd`` on 15,000 matrices, which call LAPACK once per matrix.
+    """
+    m = len(C)
+    a = {(i, j): C[:, i, j].copy() for i in range(3) for j in range(i, 3)}
+    V = [[np.full(m, float(i == j)) for j in range(3)] for i in range(3)]  # V[row][column]
+    scale = (np.abs(a[0, 0]) + np.abs(a[1, 1]) + np.abs(a[2, 2])) * 1e-15
+    for sweep in range(_JACOBI_MAX_SWEEPS):
+        if sweep >= sweeps:
+            off = np.sqrt(a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2)
+            if (off <= scale).all():
+                break
+        for p, q, r in _JACOBI_ROTATIONS:
+            apq = a[p, q]
+            with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+                tau = (a[q, q] - a[p, p]) / (2.0 * apq)
+                t = np.copysign(1.0, tau) / (np.abs(tau) + np.sqrt(1.0 + tau * tau))
+            t[~np.isfinite(t) | (apq == 0.0)] = 0.0  # already diagonal in (p, q), or tau overflowed
+            c = 1.0 / np.sqrt(1.0 + t * t)
+            s = t * c
+            a[p, p] = a[p, p] - t * apq
+            a[q, q] = a[q, q] + t * apq
+            a[p, q] = np.zeros(m)
+            rp, rq = _symmetric(r, p), _symmetric(r, q)
+            a[rp], a[rq] = c * a[rp] - s * a[rq], s * a[rp] + c * a[rq]
+            for row in V:
+                row[p], row[q] = c * row[p] - s * row[q], s * row[p] + c * row[q]
+    converged = np.sqrt(a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2) <= scale
+    values = np.stack([a[0, 0], a[1, 1], a[2, 2]], axis=1)
+    return values, np.stack([np.stack(row, axis=1) for row in V], axis=1), converged
+
+
+def rotation_preserving_svd(F):
+    """F = U diag(s) V^T with det U = det V = 1 for (m, 3, 3) F; an inverted F has s_3 < 0.
+
+    Well-conditioned F with det F > 0 (nearly every tet of a simulation) take the fast path: V and s^2
+    from Jacobi rotations on F^T F (:func:`_jacobi_eigh`), U = F V / s. The rest (inverted, nearly
+    flat, condition above :data:`_JACOBI_CONDITION`, or unconverged) take LAPACK's SVD with the
+    smallest singular value's sign flipped where a reflection must be undone. Singular values are
+    in no particular order on the fast path and descending on LAPACK's.
+    """
+    F = np.asarray(F, dtype=np.float64)
+    values, V, converged = _jacobi_eigh(np.einsum("mki,mkj->mij", F, F))
+    det_F = _det3(F)
+    lowest, highest = values.min(axis=1), values.max(axis=1)
+    fast = converged & (det_F > 0.0) & (lowest * _JACOBI_CONDITION**2 > highest)
+    s = np.sqrt(np.maximum(values, 0.0))
+    # V is a product of plane rotations, so det V = 1, and det U = det F / prod(s) > 0 on the fast path.
+    U = np.einsum("mij,mjk->mik", F, V) / np.where(fast[:, None], s, 1.0)[:, None, :]
+    Vt = np.swapaxes(V, 1, 2)
+    slow = np.flatnonzero(~fast)
+    if len(slow):
+        U_s, s_s, Vt_s = np.linalg.svd(F[slow])
+        flip_u = np.linalg.det(U_s) < 0
+        flip_v = np.linalg.det(Vt_s) < 0
+        U_s[flip_u, :, 2] *= -1.0
+        s_s[flip_u, 2] *= -1.0
+        Vt_s[flip_v, 2, :] *= -1.0
+        s_s[flip_v, 2] *= -1.0
+        U[slow], s[slow], Vt[slow] = U_s, s_s, Vt_s
+    return U, s, Vt
+
+
+def _det3(M):
+    """(m,) determinants of (m, 3, 3) matrices, by the rule of Sarrus (vectorised; LAPACK loops per matrix)."""
+    return (M[:, 0, 0] * (M[:, 1, 1] * M[:, 2, 2] - M[:, 1, 2] * M[:, 2, 1])
+            - M[:, 0, 1] * (M[:, 1, 0] * M[:, 2, 2] - M[:, 1, 2] * M[:, 2, 0])
+            + M[:, 0, 2] * (M[:, 1, 0] * M[:, 2, 1] - M[:, 1, 1] * M[:, 2, 0]))
 
 
 def corotational(F, *, project=True):
@@ -94,13 +204,7 @@ def corotational(F, *, project=True):
     twists : (m, 3, 3, 3) float -- q_r, r = 0..2, unit 3x3 directions
     coefficients : (m, 3) float -- c_r; the Hessian is 2 (I - sum_r c_r q_r q_r^T)
     """
-    U, s, Vt = np.linalg.svd(F)
-    flip_u = np.linalg.det(U) < 0
-    flip_v = np.linalg.det(Vt) < 0
-    U[flip_u, :, 2] *= -1.0
-    s[flip_u, 2] *= -1.0
-    Vt[flip_v, 2, :] *= -1.0
-    s[flip_v, 2] *= -1.0
+    U, s, Vt = rotation_preserving_svd(F)
     R = U @ Vt
     psi = ((s - 1.0) ** 2).sum(axis=1)
     P = 2.0 * (F - R)
@@ -180,6 +284,10 @@ class SmoothingDomains:
         return tuple(sp.csr_matrix((self.ring_gradient[:, k], (self.ring_domain, self.ring_node)), shape=shape)
                      for k in range(3))
 
+    @cached_property
+    def _spreading(self):
+        return tuple(G.T.tocsr() for G in self._averaging)
+
     def averaged(self, x) -> np.ndarray:
         """(d, 3, 3) float -- Fbar_d at positions x."""
         return np.stack([G @ x for G in self._averaging], axis=2)
@@ -187,7 +295,16 @@ class SmoothingDomains:
     def spread(self, stress) -> np.ndarray:
         """(n, 3) float -- sum_d stress_d gbar_da per node a, for (d, 3, 3) ``stress`` (the transpose of
         :meth:`averaged`: forces are ``-spread(V_d P_d)``)."""
-        return sum(G.T @ stress[:, :, k] for k, G in enumerate(self._averaging))
+        return sum(Gt @ np.ascontiguousarray(stress[:, :, k]) for k, Gt in enumerate(self._spreading))
+
+    @cached_property
+    def volume_layout(self) -> tuple:
+        """(indices, indptr) of a (d, 3 n) CSR matrix with one row per domain and the three unknowns of
+        each ring node in it, in ring-entry order (ring entries are sorted by domain)."""
+        counts = np.bincount(self.ring_domain, minlength=self.domain_count)
+        indices = (3 * self.ring_node[:, None] + np.arange(3)).ravel()
+        indptr = np.concatenate([[0], 3 * np.cumsum(counts)])
+        return indices, indptr
 
     @cached_property
     def pairs(self) -> tuple:

@@ -34,18 +34,20 @@ class SolverCache:
     solver : a linear solver of :mod:`volspring.solvers` (holds the AMG hierarchy once built)
     pattern : BlockPattern or None -- of the last scene stepped
     record : tuple or None -- (pattern, step, t, dt, x, v) the current hierarchy was built from
+    matrix_free : bool -- patterns apply the sets that offer it as products (:class:`BlockPattern`)
     """
 
     solver: object
     pattern: BlockPattern | None = None
     record: tuple | None = None
+    matrix_free: bool = False
 
     def pattern_for(self, scene) -> BlockPattern:
         """The block pattern of ``scene``'s model and free nodes: kept while they are the same, else rebuilt
         (and the hierarchy record dropped)."""
         cached = self.pattern
         if cached is None or cached.model is not scene.model or not np.array_equal(cached.free, scene.free):
-            self.pattern = BlockPattern(scene.model, scene.free)
+            self.pattern = BlockPattern(scene.model, scene.free, matrix_free=self.matrix_free)
             self.record = None
         return self.pattern
 
@@ -65,4 +67,4 @@ class SolverCache:
         solver = copy.copy(self.solver)
         if getattr(solver, "hierarchy", None) is not None:
             solver.hierarchy = None
-        return {"solver": solver, "pattern": None, "record": None}
+        return {"solver": solver, "pattern": None, "record": None, "matrix_free": self.matrix_free}

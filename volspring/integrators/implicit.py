@@ -20,6 +20,14 @@ is used for its stability; the error does not accumulate into instability becaus
 solves for a new dv from the actual state. Use ``rtol=1e-6`` or ``solver="direct"`` for
 checking, and ``newton_iterations`` for the fully implicit answer.
 
+Matrix-free sets. A set that couples each node's 2-ring (the smoothed rung's nodal term,
+:class:`~volspring.elements.NodalStrain`) is not assembled by the AMG solver: CG applies its
+stiffness as a product (two sparse products per iteration, no 3x3 blocks computed per step), and
+the hierarchy is built from the assembled sets plus the set's 1-ring stand-in
+(:meth:`~volspring.elements.NodalStrain.preconditioner_blocks`). The answer is the same system's;
+only the preconditioner differs. ``matrix_free=False`` assembles everything (as do the direct and
+Jacobi solvers, and ``clamp_compression=False``, whose exact curvature has no product form).
+
 Hierarchy policy. The AMG hierarchy is built from the step's own matrix and reused while it
 still works. It is rebuilt at the start of a step when
 
@@ -45,6 +53,7 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import aslinearoperator
 
 from meshing.geometry import rigid_body_modes
 from volspring.assembly import BlockPattern, eliminate_held, held_unknowns
@@ -102,6 +111,8 @@ class _System:
     extra_dfdx: sp.csr_matrix | None  # dF/dx of scene forces, all unknowns
     held: np.ndarray | None = None  # (3f,) bool held unknowns of partly held nodes, eliminated
     held_rhs: np.ndarray | None = None  # (3f,) what the held values put into the right-hand side (0 on held rows)
+    operator: object = None  # LinearOperator of the sets applied as products (held unknowns masked), or None
+    preconditioner_matrix: object = None  # callable -> the matrix with their stand-in blocks, or None
 
     def with_held(self, b) -> np.ndarray:
         """The right-hand side ``b`` with the held unknowns' rows set (see :func:`eliminate_held`)."""
@@ -113,10 +124,21 @@ class _System:
 
     @cached_property
     def whole(self) -> sp.bsr_matrix:
-        """The matrix with the extra term added, BSR with 3x3 blocks (what the AMG hierarchy is given)."""
+        """The matrix with the extra term added, BSR with 3x3 blocks (what the AMG hierarchy is given);
+        with sets applied as products, their stand-in blocks instead of them."""
+        matrix = self.matrix if self.preconditioner_matrix is None else self.preconditioner_matrix()
         if self.extra is None:
-            return self.matrix
-        return sp.bsr_matrix(self.matrix + self.extra, blocksize=(3, 3))
+            return matrix
+        return sp.bsr_matrix(matrix + self.extra, blocksize=(3, 3))
+
+    @property
+    def products(self):
+        """What CG adds to ``matrix @ p``: the extra term and the sets applied as products (or None)."""
+        if self.operator is None:
+            return self.extra
+        if self.extra is None:
+            return self.operator
+        return self.operator + aslinearoperator(self.extra)
 
 
 class ImplicitEuler(Integrator):
@@ -135,6 +157,7 @@ class ImplicitEuler(Integrator):
     clamp_compression : bool -- clamp the transverse stiffness of compressed springs at 0
     on_failure : {"raise", "warn"} -- what a solve that stops short of ``rtol`` does
     smoother : {"gauss_seidel", "jacobi"} -- AMG smoother
+    matrix_free : bool -- apply the sets that offer it as products (see the module docstring)
 
     Attributes
     ----------
@@ -162,7 +185,7 @@ class ImplicitEuler(Integrator):
 
     def __init__(self, *, solver="amg", rtol=1e-3, maxiter=500, newton_iterations=0, rebuild_growth=2.0,
                  rebuild_every=None, clamp_compression=True, on_failure="raise", smoother="gauss_seidel",
-                 timer=time.perf_counter):
+                 matrix_free=True, timer=time.perf_counter):
         if solver not in LINEAR_SOLVERS:
             raise ValueError(f"unknown solver {solver!r}; known: {', '.join(LINEAR_SOLVERS)}")
         if int(newton_iterations) < 0:
@@ -183,12 +206,14 @@ class ImplicitEuler(Integrator):
         self.rebuild_growth = float(rebuild_growth)
         self.rebuild_every = None if rebuild_every is None else int(rebuild_every)
         self.clamp_compression = bool(clamp_compression)
+        self.matrix_free = bool(matrix_free) and solver == "amg" and self.clamp_compression
         self.last_solve = None
         self.cache = self.new_cache()
 
     def new_cache(self) -> SolverCache:
         """An empty :class:`SolverCache` for one scene (see :mod:`volspring.integrators.cache`)."""
-        return SolverCache(make_linear_solver(self.method, timer=self.timer, **self._solver_options))
+        return SolverCache(make_linear_solver(self.method, timer=self.timer, **self._solver_options),
+                           matrix_free=self.matrix_free)
 
     @property
     def solver(self):
@@ -234,27 +259,41 @@ class ImplicitEuler(Integrator):
             else:
                 extra = restricted.tocsr()
         matrix = pattern.matrix(springs, diagonal)
+        operator = pattern.operator(springs)
+
+        def preconditioner():  # the matrix with the stand-in blocks of the sets applied as products
+            standing_in = pattern.matrix(springs, diagonal, preconditioner=True)
+            return standing_in if held is None else eliminate_held(pattern, standing_in, held)[0]
+
         held = held_rhs = None
         if scene.partly_held:
             held = held_unknowns(pattern, scene.held)
             values = np.zeros(pattern.size) if prescribed is None else pattern.restrict(prescribed) * held
             coupling = matrix @ values + (extra @ values if extra is not None else 0.0)
+            if operator is not None:
+                coupling = coupling + operator @ values
+                keep = (~held).astype(np.float64)
+                operator = aslinearoperator(sp.diags(keep)) @ operator @ aslinearoperator(sp.diags(keep))
             matrix, _, extra = eliminate_held(pattern, matrix, held, extra=extra)
             # The held unknowns solve to 0 and are set outright (v1 already holds them).
             held_rhs = np.where(held, 0.0, -coupling)
         return _System(matrix, extra, springs, forces, self.timer() - clock, extra_full,
-                       None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs)
+                       None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs, operator,
+                       None if operator is None else preconditioner)
 
     def linear_system(self, scene: Scene, state: State, dt: float):
         """The linearised system of one step from ``state``, over the free unknowns.
 
         Returns
         -------
-        matrix : (3f, 3f) BSR -- M - h dF/dv - h^2 dF/dx of the springs (plus diagonal scene terms)
+        matrix : (3f, 3f) BSR -- M - h dF/dv - h^2 dF/dx of every element set, assembled (also those
+            the step applies as products), plus diagonal scene terms
         extra : (3f, 3f) CSR or None -- non-diagonal scene-force terms, applied separately
         pattern : BlockPattern -- numbering of the unknowns (``pattern.free_nodes``)
         """
         pattern = self.pattern(scene)
+        if pattern.has_operator:
+            pattern = BlockPattern(scene.model, scene.free)
         system = self._assemble(scene, pattern, state.x, state.v, state.t, float(dt))
         return system.matrix, system.extra, pattern
 
@@ -379,4 +418,4 @@ class ImplicitEuler(Integrator):
             # Contact changes from step to step: the fine level of the kept hierarchy gets the current
             # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay.
             cache.solver.refresh(system.whole)
-        return cache.solver.solve(system.matrix, b, x0=warm, extra=system.extra)
+        return cache.solver.solve(system.matrix, b, x0=warm, extra=system.products)

@@ -316,8 +316,8 @@ class AMGConjugateGradient(_LinearSolver):
         rhs : (N,) float
         x0 : (N,) float, optional
             Warm start.
-        extra : (N, N) sparse, optional
-            Added in every product, left out of the hierarchy.
+        extra : (N, N) sparse or LinearOperator, optional
+            Added in every product, left out of the hierarchy (a matrix-free term: anything with ``@``).
         near_null_space, prolongation
             As for :meth:`build`; needed only when this solve builds the hierarchy.
         """

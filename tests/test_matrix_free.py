@@ -1,0 +1,89 @@
+"""The implicit step applies the continuum sets as products (matrix-free) and preconditions with a 1-ring
+stand-in: the system it solves must be exactly the assembled one, supports and prescribed motion included."""
+
+import numpy as np
+import pytest
+
+from meshing import structured_box
+from volspring import Gravity, Material, Model, Pins, Scene
+from volspring.assembly import BlockPattern
+from volspring.integrators.implicit import ImplicitEuler
+from volspring.supports import Prescribed, Sliding
+
+RUBBER = Material(E=1e6, nu=0.45, density=1000.0)
+
+
+@pytest.fixture(scope="module", params=["smoothed", "springs+volume"])
+def bar(request):
+    mesh = structured_box((6, 2, 2), (0.6, 0.2, 0.2))
+    return mesh, Model.from_mesh(mesh, RUBBER, model=request.param)
+
+
+def _in_model_numbering(pattern, vector):
+    out = np.zeros((pattern.model.node_count, 3))
+    out[pattern.free_nodes] = np.reshape(vector, (-1, 3))
+    return out
+
+
+def test_the_products_and_the_matrix_make_the_assembled_system(bar):
+    mesh, model = bar
+    rng = np.random.default_rng(3)
+    x = mesh.points + 0.02 * rng.standard_normal(mesh.points.shape)  # strained and rotated tets
+    v = rng.standard_normal(x.shape)
+    free = mesh.points[:, 0] > 0.05
+    assembled = BlockPattern(model, free)
+    applied = BlockPattern(model, free, matrix_free=True)
+    assert applied.has_operator and not assembled.has_operator
+    options = dict(stiffness_scale=1e-4, damping_scale=1e-2)
+    full, split = assembled.linearize(x, v, **options), applied.linearize(x, v, **options)
+    # The same forces by another summation order (sparse products instead of bincount): round-off only.
+    np.testing.assert_allclose(split.forces, full.forces, rtol=0, atol=1e-12 * abs(full.forces).max())
+    u = rng.standard_normal(x.shape)
+    reference = _in_model_numbering(assembled, assembled.matrix(full) @ assembled.restrict(u))
+    product = applied.matrix(split) @ applied.restrict(u) + applied.operator(split) @ applied.restrict(u)
+    # Round-off of sums over a few hundred blocks of size ~1e-4 E h: 1e-12 of the largest entry.
+    scale = abs(reference).max()
+    np.testing.assert_allclose(_in_model_numbering(applied, product), reference, rtol=0, atol=1e-12 * scale)
+    np.testing.assert_allclose(applied.dfdx_times(split, u), assembled.dfdx_times(full, u), rtol=0,
+                               atol=1e-12 * abs(assembled.dfdx_times(full, u)).max())
+    prescribed = np.where(free[:, None], 0.0, u)
+    coupling = assembled.boundary_coupling(full, prescribed)
+    np.testing.assert_allclose(applied.boundary_coupling(split, prescribed)[free], coupling[free], rtol=0,
+                               atol=1e-12 * abs(coupling).max())
+
+
+def test_the_stand_in_is_symmetric_positive_definite_and_on_the_one_ring(bar):
+    mesh, model = bar
+    applied = BlockPattern(model, mesh.points[:, 0] > 0.05, matrix_free=True)
+    lin = applied.linearize(mesh.points, stiffness_scale=1.0)
+    stand_in = applied.matrix(lin, 1e-9, preconditioner=True).toarray()
+    assert np.allclose(stand_in, stand_in.T, rtol=0, atol=1e-9 * abs(stand_in).max())
+    assert np.linalg.eigvalsh(stand_in).min() > 0
+    # The 1-ring: as many 3x3 blocks as a pattern of the tets' edges (the 2-ring has several times more).
+    assert applied.block_count < BlockPattern(model, mesh.points[:, 0] > 0.05).block_count / 2
+
+
+def test_matrix_free_steps_equal_assembled_steps_with_sliding_and_prescribed_supports(bar):
+    mesh, model = bar
+    left = np.flatnonzero(mesh.points[:, 0] == 0.0)
+    right = np.flatnonzero(np.isclose(mesh.points[:, 0], 0.6))
+    start = mesh.points[right]
+    scene = Scene(model, forces=[Gravity()], pins=Pins(left[:1]),
+                  supports=[Sliding(left[1:], "x"), Prescribed(right, "x", motion=lambda t: start + [0.5 * t * t, 0, 0])])
+    states = {}
+    for matrix_free in (True, False):
+        integrator = ImplicitEuler(rtol=1e-12, matrix_free=matrix_free)
+        state = scene.initial_state()
+        for _ in range(4):
+            state = integrator.step(scene, state, 0.01)
+        states[matrix_free] = state
+        assert integrator.cache.pattern.has_operator == matrix_free
+    # Both solve the same system to rtol 1e-12; the answers differ by that residual over the conditioning.
+    displacement = abs(states[False].x - mesh.points).max()
+    np.testing.assert_allclose(states[True].x, states[False].x, rtol=0, atol=1e-8 * displacement)
+
+
+def test_the_direct_solver_and_exact_curvature_assemble_everything():
+    assert not ImplicitEuler(solver="direct").matrix_free
+    assert not ImplicitEuler(clamp_compression=False).matrix_free
+    assert ImplicitEuler().matrix_free
