@@ -34,6 +34,12 @@ def test_quick_writes_the_three_outputs(quick_run):
     assert results["files"]["cantilever_gravity"]["models"][0] == "fem_P2"
     for name in ("numpy", "scipy", "scikit-fem", "pyamg", "volspring"):
         assert results["versions"][name]
+    # The ladder: every rung on every built-in case (the held-out shapes are in the full run only), first on the page.
+    rows = results["ladder"]["rows"]
+    assert {(row["case"], row["rung"]) for row in rows} == {
+        (case, rung) for case in ("cantilever_gravity", "cantilever_end_load", "hanging_bar", "uniaxial_compression",
+                                  "cantilever_modes") for rung in ("springs", "springs+volume", "smoothed")}
+    assert page.index("<h2") == page.index("<h2 id='ladder'>") < page.index("<table")
 
 
 def test_vtu_holds_fem_and_spring_shapes(quick_run):
@@ -42,8 +48,10 @@ def test_vtu_holds_fem_and_spring_shapes(quick_run):
     _, out = quick_run
     data = meshio.read(out / "vtu" / "cantilever_gravity.vtu")
     assert {"displacement_fem_P2", "displacement_springs_van_gelder", "error_springs_lloyd"} <= set(data.point_data)
+    assert {"displacement_model_smoothed", "displacement_model_springs+volume"} <= set(data.point_data)
     side = TetMesh.read(out / "vtu" / "cantilever_gravity_side_by_side.vtu")
-    assert side.node_count == 5 * len(data.points)  # P2, P1 and three spring rules side by side
+    # P2, P1, three spring rules and the two upper rungs side by side (the springs rung is springs_van_gelder).
+    assert side.node_count == 7 * len(data.points)
 
 
 def test_results_agree_with_a_direct_computation(quick_run):
@@ -163,6 +171,13 @@ def test_own_mesh_run(beam_file, tmp_path):
     assert set(own["springs"]) == {"van_gelder", "lloyd", "uniform"}
     assert np.isfinite(own["springs"]["van_gelder"]["tip_deflection_error"])
     assert (out / "vtu" / "own_mesh.vtu").is_file()
+    # Every rung on the user's mesh, and nothing else in the ladder.
+    rows = results["ladder"]["rows"]
+    assert [(row["case"], row["rung"]) for row in rows] == [("own_mesh", rung)
+                                                           for rung in ("springs", "springs+volume", "smoothed")]
+    for row in rows:
+        assert np.isfinite(row["tip_deflection_error"]) and row["block_count"] > 0
+    assert rows[0]["tip_deflection_m"] == own["springs"]["van_gelder"]["tip_deflection_m"]  # the same answer
 
 
 def test_results_files_are_read_back_with_their_schema_checked(tmp_path):

@@ -1,8 +1,11 @@
 """The case of a user's own mesh: :func:`own_mesh_case`, the check that its clamp holds it
 (:func:`check_held`) and its clamp regions written as text (:func:`parse_region`).
 
-``volspring-validate --mesh FILE --clamp REGION`` builds its case here. Import these names from
-:mod:`validation.cases`, their one public home.
+``volspring-validate --mesh FILE --clamp REGION`` builds its case here, and the report runs every rung of
+the ladder on it (``--model`` selects them; :mod:`validation.ladder`): the tip is the node the P2
+reference moves most, a rung that refuses the material (``"springs+volume"`` below the spring network's
+own nu, measured on this mesh) is reported as such. Import these names from :mod:`validation.cases`,
+their one public home.
 
 Examples
 --------

@@ -1,14 +1,19 @@
-"""``volspring-validate``: the spring model against linear-elastic FEM, as a report.
+"""``volspring-validate``: the ladder of models (springs, springs+volume, smoothed) against linear-elastic
+FEM, as a report.
 
 Examples
 --------
-Everything, on coarse meshes, in about a minute::
+Everything, on coarse meshes, in about half a minute (the held-out shapes only in the full run)::
 
     volspring-validate --quick --out validation-report
 
-Your own mesh, clamped at its lowest z, under gravity::
+Your own mesh, clamped at its lowest z, under gravity, on every rung of the ladder::
 
     volspring-validate --mesh part.vtu --clamp zmin --E 2e6 --nu 0.4 --density 1100 --out part-report
+
+Only some rungs (``--model``, comma-separated; default all of :data:`volspring.ladder.MODELS`)::
+
+    volspring-validate --quick --model springs,smoothed --out validation-report
 
 Writes ``OUT/report.html``, ``OUT/results.json`` and ``OUT/vtu/*.vtu``, and lists them in
 ``OUT/volspring-run.json`` (a :class:`volspring.output.RunFolder`). Running the same command again
@@ -64,15 +69,19 @@ class _Bar:
 
 
 def _parser():
-    from validation.report import BUILT_IN, STUDIES
+    from validation.report import BUILT_IN, HELDOUT, STUDIES
     from meshing.units import add_unit_arguments
+    from volspring.ladder import MODELS
 
     parser = argparse.ArgumentParser(
-        prog=PROG, description="Compare the spring model with linear-elastic FEM (scikit-fem, P2) on the same "
-                               "meshes and write report.html, results.json and VTU files.")
+        prog=PROG, description="Compare the ladder of models (springs, springs+volume, smoothed) with linear-elastic "
+                               "FEM (scikit-fem, P2) on the same meshes and write report.html, results.json and "
+                               "VTU files.")
     parser.add_argument("cases", nargs="*", metavar="CASE",
-                        help=f"cases and studies to run: {', '.join(BUILT_IN + STUDIES)} (default: all, or only "
-                             "your mesh with --mesh)")
+                        help=f"cases and studies to run: {', '.join(BUILT_IN + HELDOUT + STUDIES)} (default: all, "
+                             "the held-out shapes not with --quick; only your mesh with --mesh)")
+    parser.add_argument("--model", default=",".join(MODELS), metavar="NAME[,NAME...]",
+                        help=f"rungs of the ladder to validate: {', '.join(MODELS)} (default: all)")
     parser.add_argument("--quick", action="store_true", help="coarse meshes and short runs (about a minute)")
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="output folder; the same command run again replaces its report there")
@@ -134,11 +143,17 @@ def _own_case(args):
 
 
 def _check(args):
-    from validation.report import BUILT_IN, STUDIES
+    from validation.ladder import parse_models
+    from validation.report import BUILT_IN, HELDOUT, STUDIES
 
-    unknown = [name for name in args.cases if name not in BUILT_IN + STUDIES]
+    known = BUILT_IN + HELDOUT + STUDIES
+    unknown = [name for name in args.cases if name not in known]
     if unknown:
-        raise _BadInput(f"unknown case {unknown[0]!r}; known: {', '.join(BUILT_IN + STUDIES)}")
+        raise _BadInput(f"unknown case {unknown[0]!r}; known: {', '.join(known)}")
+    try:
+        args.models = parse_models(args.model)
+    except ValueError as error:
+        raise _BadInput(f"--model {args.model!r}: {error}") from None
     if not args.nu < 0.5:
         raise _BadInput(f"--nu {args.nu:g} is not < 0.5 (nu = 0.5 is incompressible: the bulk modulus is infinite "
                         "and linear elasticity has no displacement-only solution)")
@@ -212,8 +227,8 @@ def main(argv=None) -> int:
             start = time.perf_counter()
             with run:
                 try:
-                    validate(args.out, cases=args.cases, quick=args.quick, own_case=own, folder=args.cache,
-                             progress=bar, command=command, record=run.record)
+                    validate(args.out, cases=args.cases, quick=args.quick, own_case=own, models=args.models,
+                             folder=args.cache, progress=bar, command=command, record=run.record)
                 except (ValueError, ArithmeticError, RuntimeError, OSError) as error:
                     run.finish("failed")
                     bar.close()

@@ -1,12 +1,14 @@
-"""The spring model's answer on a validation case: statics, frequencies, effective elastic constants.
+"""The spring model's (or any rung's) answer on a validation case: statics, frequencies, effective elastic
+constants.
 
 Validation builds a volspring scene from a :class:`~validation.cases.Case` (:func:`case_scene`:
 clamps become supports, including sliding ones and prescribed displacements; tractions and
 gravity become forces) and asks volspring's own solvers: the static equilibrium
 (:func:`spring_static`, :func:`volspring.statics.solve_static`: Newton on the nonlinear model)
 and the vibration frequencies (:func:`spring_frequencies`, :func:`volspring.modes.solve_modes`).
-Whatever element sets the model carries (springs, volume terms) are therefore validated here
-without a line of validation code.
+Whatever element sets the model carries (springs, volume terms, smoothed strain: any rung of
+:mod:`volspring.ladder`, built by :func:`rung_model`) are therefore validated here without a line
+of validation code.
 
 Stiffness rules: ``van_gelder`` and ``lloyd`` from the material (:mod:`volspring.model`), and
 ``uniform`` with one constant for every spring, the mean Van Gelder constant of the same mesh
@@ -58,6 +60,7 @@ __all__ = [
     "deformed_volume_change",
     "effective_constants",
     "held_nodes",
+    "rung_model",
     "spring_frequencies",
     "spring_model",
     "spring_static",
@@ -85,6 +88,18 @@ def spring_model(mesh: TetMesh, material: Material, rule: str, **options) -> Mod
         return Model.from_mesh(mesh, material, rule="uniform", stiffness=uniform_stiffness(mesh, material),
                                      **options)
     return Model.from_mesh(mesh, material, rule=rule, **options)
+
+
+def rung_model(mesh: TetMesh, material: Material, rung: str, **options) -> Model:
+    """The model of ``mesh`` on a rung of the ladder (:data:`volspring.ladder.MODELS`), by
+    :meth:`Model.from_mesh` itself: the springs rung with volspring's default rule (van Gelder).
+
+    Raises
+    ------
+    ValueError
+        As :meth:`Model.from_mesh`: an unknown rung, or ``"springs+volume"`` below the network's own nu.
+    """
+    return Model.from_mesh(mesh, material, model=rung, **options)
 
 
 def traction_forces(mesh: TetMesh, tractions) -> np.ndarray:

@@ -19,6 +19,7 @@ writes ``DIR/report.html`` (self-contained: tables, matplotlib figures as base64
 from validation.report.outputs import read_results, validate, write_outputs
 from validation.report.runner import (
     BUILT_IN,
+    HELDOUT,
     NOTES,
     SCHEMA,
     STATIC_CASES,

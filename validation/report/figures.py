@@ -47,7 +47,9 @@ def log_ticks(axes) -> None:
 
 def model_label(model: str) -> str:
     """Display name of a model key: ``"fem_P2"`` -> ``"FEM P2 (reference)"``,
-    ``"springs_lloyd"`` -> ``"springs: lloyd"``."""
+    ``"springs_lloyd"`` -> ``"springs: lloyd"``, ``"model_smoothed"`` -> ``"rung: smoothed"``."""
+    if model.startswith("model_"):
+        return "rung: " + model[len("model_"):]
     return {"fem_P2": "FEM P2 (reference)", "fem_P1": "FEM P1"}.get(model, model.replace("springs_", "springs: "))
 
 

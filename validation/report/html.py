@@ -1,6 +1,7 @@
 """The report page: one self-contained HTML file (tables, figures as base64 PNG, no script, no links out).
 
-:func:`render_html` lays out the results of :func:`validation.report.runner.run_validation`: the
+:func:`render_html` lays out the results of :func:`validation.report.runner.run_validation`: first the
+ladder of models (each rung's error against P2 beside its cost per step and matrix size), then the
 headline errors, the Cauchy limit, one section per case, the refinement and speed studies and the
 VTU files for ParaView, with the figures of :func:`validation.report.figures.render_figures`.
 """
@@ -35,10 +36,31 @@ def _fmt(value, kind="number") -> str:
     return f"{value:.4g}"
 
 
-def _table(header, rows) -> str:
+def _table(header, rows, *, extra="") -> str:
+    """A table of ready cells; ``extra``: more rows as HTML (a refusal spanning the row)."""
     head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
     body = "".join("<tr>" + "".join(f"<td>{cell}</td>" for cell in row) + "</tr>" for row in rows)
-    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    return f"<table><thead><tr>{head}</tr></thead><tbody>{body}{extra}</tbody></table>"
+
+
+def _answers(case):
+    """(label, values) of each spring rule, then of each rung of the ladder that answered."""
+    for rule, values in case["springs"].items():
+        yield f"springs: {rule}", values
+    for rung, values in case.get("models", {}).items():
+        if "refused" not in values:
+            yield f"rung: {rung}", values
+
+
+def _refusals(case, width) -> str:
+    return "".join(_refused_row([f"rung: {html.escape(rung)}"], values["refused"], width)
+                   for rung, values in case.get("models", {}).items() if "refused" in values)
+
+
+def _refused_row(labels, message, width) -> str:
+    """A table row: the cells ``labels`` (ready HTML), then the refusal ``message`` across ``width`` columns."""
+    return ("<tr>" + "".join(f"<td>{label}</td>" for label in labels)
+            + f"<td colspan='{width}' class='warn' style='text-align: left'>refused: {html.escape(message)}</td></tr>")
 
 
 def _image(figures, key, alt) -> str:
@@ -58,11 +80,12 @@ def _case_html(name, case, figures) -> str:
     if case["kind"] == "modes":
         fem = case["fem"]["P2"]
         rows = [["FEM P2 (reference)"] + [_fmt(f) for f in fem["frequencies_hz"]] + ["&ndash;"]]
-        for rule, values in case["springs"].items():
-            rows.append([f"springs: {rule}"] + [_fmt(f) for f in values["frequencies_hz"]]
+        for label, values in _answers(case):
+            rows.append([label] + [_fmt(f) for f in values["frequencies_hz"]]
                         + [_fmt(values["first_frequency_error"], "percent")])
         count = len(fem["frequencies_hz"])
-        parts.append(_table(["model"] + [f"f{k + 1} [Hz]" for k in range(count)] + ["f1 error vs P2"], rows))
+        parts.append(_table(["model"] + [f"f{k + 1} [Hz]" for k in range(count)] + ["f1 error vs P2"], rows,
+                            extra=_refusals(case, count + 1)))
         parts.append(f"<p>Euler-Bernoulli: first bending frequency {_fmt(case['analytic']['first_frequency_hz'])} Hz "
                      "(a square section has a degenerate pair, y and z; springs on a coarse mesh split it).</p>")
         return "".join(parts)
@@ -74,14 +97,14 @@ def _case_html(name, case, figures) -> str:
                      _fmt(values.get("rms_displacement_error"), "percent"),
                      _fmt(values.get("max_displacement_error"), "percent"),
                      _fmt(values["deformed_volume_change_m3"]), "&ndash;", "&ndash;"])
-    for rule, values in case["springs"].items():
-        rows.append([f"springs: {rule} ({values['solver']})", _fmt(1e3 * values["tip_deflection_m"]),
+    for label, values in _answers(case):
+        rows.append([f"{label} ({values['solver']})", _fmt(1e3 * values["tip_deflection_m"]),
                      _fmt(values["tip_deflection_error"], "percent"), _fmt(values["rms_displacement_error"], "percent"),
                      _fmt(values["max_displacement_error"], "percent"), _fmt(values["volume_change_m3"]),
                      _fmt(values["volume_change_error_vs_fem"], "percent"),
                      _fmt(values["volume_change_error_vs_analytic"], "percent")])
     parts.append(_table(["model", "tip [mm]", "tip error", "RMS error", "max error", "volume change [m^3]",
-                         "volume vs FEM", "volume vs exact"], rows))
+                         "volume vs FEM", "volume vs exact"], rows, extra=_refusals(case, 7)))
     theory = ", ".join(f"{k} = {_fmt(v)}" for k, v in analytic.items())
     parts.append(f"<p class='small'>Closed form: {theory}. Errors are relative to FEM P2 on the same mesh; RMS and max "
                  "nodal errors relative to the reference's RMS and max displacement.</p>")
@@ -89,6 +112,76 @@ def _case_html(name, case, figures) -> str:
     if name == "uniaxial_compression":
         parts.append(_image(figures, "volume", "volume change against strain"))
     return "".join(parts)
+
+
+def _blocks(row) -> str:
+    """The system's 3x3 blocks, and in parentheses those assembled per step when fewer (matrix-free sets)."""
+    assembled = row.get("assembled_block_count")
+    if assembled is None or assembled == row["block_count"]:
+        return _fmt(row["block_count"])
+    return f"{_fmt(row['block_count'])} ({_fmt(assembled)})"
+
+
+def _ladder_html(ladder) -> str:
+    """The ladder section: one row per case and rung, then the rungs' effective constants."""
+    header = ["case", "rung", "nodes", "tip [mm] (P2)", "tip error", "volume change error",
+              "f1 / f2 / f3 error", "E_eff / E", "nu_eff (asked)", "ms per step", "cost x springs",
+              "CG iterations", "3x3 blocks (assembled)", "nonzeros"]
+    body, previous = [], None
+    for row in ladder["rows"]:
+        case = html.escape(row["case"]) if row["case"] != previous else ""
+        previous = row["case"]
+        if "refused" in row:
+            body.append(_refused_row([case, html.escape(row["rung"])], row["refused"], len(header) - 2))
+            continue
+        static = row["kind"] != "modes"
+        tip = (f"{_fmt(1e3 * row['tip_deflection_m'])} ({_fmt(1e3 * row['reference_tip_deflection_m'])})"
+               if static else None)
+        frequencies = None if static else " / ".join(_fmt(e, "percent") for e in row["frequency_errors"])
+        cells = [case, html.escape(row["rung"]), _fmt(row["node_count"]), _fmt(tip),
+                 _fmt(row.get("tip_deflection_error"), "percent"),
+                 _fmt(row.get("volume_change_error_vs_fem"), "percent"),
+                 frequencies or "&ndash;", _fmt(row.get("E_effective_ratio")),
+                 f"{_fmt(row.get('nu_effective'))} ({_fmt(row['nu'])})", _fmt(1e3 * row["step_seconds"]),
+                 _fmt(row["step_cost_vs_springs"]), _fmt(row["cg_iterations"]), _blocks(row),
+                 _fmt(row["nonzero_count"])]
+        body.append("<tr>" + "".join(f"<td>{cell}</td>" for cell in cells) + "</tr>")
+    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
+    table = f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>"
+    constants, width = [], 4
+    for rung, by_nu in ladder["constants"].items():
+        for values in by_nu.values():
+            label = f"{html.escape(rung)}, nu = {_fmt(values['nu_asked'])}"
+            if "refused" in values:
+                constants.append(_refused_row([label], values["refused"], width))
+            else:
+                cells = [label, _fmt(values["E_ratio"]), _fmt(values["nu_effective"]),
+                         _fmt(values["volume_strain_per_axial_strain"]), _fmt(1.0 - 2.0 * values["nu_asked"])]
+                constants.append("<tr>" + "".join(f"<td>{cell}</td>" for cell in cells) + "</tr>")
+    constants_table = _table(["rung, nu asked", "E_eff / E", "nu_eff", "dV/(V eps)", "exact 1 - 2 nu"], [],
+                             extra="".join(constants))
+    return (
+        "<h2 id='ladder'>The ladder: accuracy against cost</h2>"
+        "<p><b>Each rung of the model ladder on each case, through volspring's own solvers, against FEM P2 on "
+        "the same mesh</b> (the springs rung by the default rule, "
+        f"{html.escape(ladder['rule'])}). Errors are signed and relative to P2; the modal case compares the "
+        "first three frequencies in ascending order. E_eff and nu_eff: uniaxial stress on a cube of "
+        f"{ladder['constants_cells']}<sup>3</sup> cells, at the case's nu. Cost: the median wall time of one "
+        f"implicit Euler step (AMG-preconditioned CG) at dt = {_fmt(ladder['dt_s'])} s over {ladder['steps']} "
+        f"steps (after {ladder['warmup_steps']} warm-up steps), and its ratio to the springs rung on the same mesh "
+        "and dt, timed alternately in this run; matrix size: the 3x3 blocks of the implicit matrix over the free "
+        "nodes (nonzeros = 9 x blocks), and in parentheses the blocks the integrator assembles per step where it "
+        "applies a set as a product instead (the upper rungs' nodal strain term, which couples each node's "
+        "2-ring).</p>"
+        "<p>Volume change is measured from the nodal displacements: the total volume of the mesh with its nodes "
+        "moved, the same measure for every rung and for P2 (whose midside nodes it ignores). Per-tet volumes "
+        "mislead: the volume terms of the upper rungs hold volume over the patch of tets around each node, not "
+        "in each tet, so single tets may swell and shrink in a pattern that cancels over a patch, and P2's "
+        "volume strain varies inside a tet; the mesh's total is what every model, and a renderer, sees. Where P2's "
+        "moved mesh changes volume more by rotation (the O(|grad u|<sup>2</sup>) growth of a linear field in "
+        "bending) than its linearised volume change, the integral of div u, no relative error is shown: it "
+        "would measure the reference's geometry, not the material.</p>"
+        + table + "<h3>Effective elastic constants of each rung</h3>" + constants_table)
 
 
 def render_html(results: dict, figures: dict) -> str:
@@ -108,6 +201,8 @@ def render_html(results: dict, figures: dict) -> str:
         The HTML document.
     """
     parts = []
+    ladder = results.get("ladder")
+    ladder_section = _ladder_html(ladder) if ladder and ladder["rows"] else ""
     rules = results["rules"]
     headline = results.get("headline", {})
     if headline:
@@ -198,9 +293,10 @@ img {{ max-width: 100%; }}
 .small {{ font-size: 0.85em; color: #555; }}
 .warn {{ color: #a00; }}
 </style></head><body>
-<h1>volspring: springs against linear-elastic FEM</h1>
+<h1>volspring: the ladder of models against linear-elastic FEM</h1>
 <p class="small">{html.escape(results['created'])} &middot; {'quick' if results['quick'] else 'full'} run
 &middot; <code>{html.escape(command)}</code><br>{html.escape(versions_text)}</p>
+{ladder_section}
 <ul class="small">{notes}</ul>
 {''.join(parts)}
 </body></html>

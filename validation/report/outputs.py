@@ -21,6 +21,7 @@ from validation.report import html as report_html
 from validation.report import runner
 from meshing._io import atomic_path
 from meshing.mesh import TetMesh
+from volspring.ladder import MODELS
 
 __all__ = ["read_results", "validate", "write_outputs"]
 
@@ -28,14 +29,14 @@ __all__ = ["read_results", "validate", "write_outputs"]
 # so that replacing one there (a test's monkeypatch) replaces what runs here.
 
 
-def validate(out, *, cases=None, quick: bool = False, own_case=None, rules=RULES, folder=None, progress=None,
-             command=None, record=None) -> dict:
+def validate(out, *, cases=None, quick: bool = False, own_case=None, rules=RULES, models=MODELS, folder=None,
+             progress=None, command=None, record=None) -> dict:
     """:func:`~validation.report.runner.run_validation` then :func:`write_outputs` into ``out``; returns the results.
 
     ``record`` is passed on to :func:`write_outputs`.
     """
     results, artefacts = runner.run_validation(cases=cases, quick=quick, own_case=own_case, rules=rules,
-                                               folder=folder, progress=progress)
+                                               models=models, folder=folder, progress=progress)
     results["command"] = command
     write_outputs(out, results, artefacts, record=record)
     return results

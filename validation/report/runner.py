@@ -1,7 +1,8 @@
 """Run the validation cases and studies and collect their results.
 
 :func:`run_validation` runs the built-in cases (:mod:`validation.cases`, compared by
-:mod:`validation.compare`), the studies (:mod:`validation.studies`) and optionally a user's own
+:mod:`validation.compare`), the ladder of models on them and on the held-out shapes
+(:mod:`validation.ladder`), the studies (:mod:`validation.studies`) and optionally a user's own
 mesh; it returns the results as plain JSON numbers, every key naming its unit, with the
 comparisons the VTU files are made of (written by :mod:`validation.report.outputs`).
 
@@ -9,14 +10,26 @@ results.json layout (units in the key names: ``_m``, ``_m3``, ``_hz``, ``_pa``, 
 ``_n_per_m``; ``*_error`` are signed relative errors, (value - reference) / |reference|, 0.01 = 1%):
 
 - ``schema``, ``created``, ``command``, ``quick``, ``versions`` (python, numpy, scipy, scikit-fem,
-  pyamg, meshio, matplotlib, volspring), ``units``, ``notes``;
+  pyamg, meshio, matplotlib, volspring), ``units``, ``notes``, ``rules``, ``models`` (the rungs run);
+- ``ladder``: every rung of :data:`volspring.ladder.MODELS` on every case (:func:`validation.ladder.run_ladder`):
+  ``models``, ``rule`` (of the springs rung), ``dt_s``, ``steps``, ``warmup_steps`` (of the cost
+  measurement), ``constants_cells`` and ``constants.<rung>.<nu>`` (effective ``E_pa``, ``E_ratio``,
+  ``nu_effective``, ``volume_strain_per_axial_strain`` on the cube, or ``refused``), and ``rows``: one
+  per case and rung with ``case``, ``rung``, ``nu``, ``node_count``; static cases ``tip_deflection_m``,
+  ``reference_tip_deflection_m`` (P2), ``tip_deflection_error``, ``rms_displacement_error``,
+  ``volume_change_m3``, ``reference_volume_change_m3``, ``volume_change_error_vs_fem``; the modal case
+  ``frequencies_hz``, ``reference_frequencies_hz``, ``frequency_errors`` (first three); every row
+  ``E_effective_ratio``, ``nu_effective``, ``step_seconds``, ``step_cost_vs_springs``, ``cg_iterations``,
+  ``block_count``, ``nonzero_count``, ``unknown_count``, ``assembled_block_count``
+  (:func:`validation.ladder.step_costs`); a rung that refuses the material: ``refused`` (its message) instead of numbers;
 - ``cases.<name>``: ``parameters``, ``mesh`` (node_count, tet_count, cells), ``analytic``,
   ``fem.P2`` / ``fem.P1`` (tip_deflection_m, volume_change_m3, deformed_volume_change_m3, ...),
   ``springs.<rule>`` (tip_deflection_m, tip_deflection_error, rms_displacement_error,
   max_displacement_error, volume_change_m3, volume_change_error_vs_fem,
-  volume_change_error_vs_analytic, solver, ...), ``beam_profile`` for beams, ``sweep`` for the
-  compression case; modal case: ``fem.P2.frequencies_hz``, ``springs.<rule>.frequencies_hz``,
-  ``first_frequency_error``;
+  volume_change_error_vs_analytic, solver, ...), ``models.<rung>`` (the same for each rung, or
+  ``refused``), ``beam_profile`` for beams, ``sweep`` for the compression case; modal case:
+  ``fem.P2.frequencies_hz``, ``springs.<rule>.frequencies_hz``, ``models.<rung>.frequencies_hz``,
+  ``first_frequency_error``; the held-out shapes are in ``ladder`` only;
 - ``studies.refinement``, ``studies.speed``, ``studies.cauchy`` (see :mod:`validation.studies`);
 - ``headline.<rule>``: the figures the README quotes;
 - ``files``: the VTU files written and the models in them (added by
@@ -28,16 +41,21 @@ from __future__ import annotations
 import datetime
 import platform
 
-from validation import studies
+from validation import ladder, studies
 from validation.cases import build_case, uniaxial_compression
 from validation.compare import RULES, compare_modes, compare_static
+from validation.heldout import HELDOUT_CASE_NAMES
+from volspring.ladder import MODELS
 
-__all__ = ["BUILT_IN", "NOTES", "SCHEMA", "STATIC_CASES", "STUDIES", "SWEEP_NUS", "SWEEP_STRAINS", "UNITS",
+__all__ = ["BUILT_IN", "HELDOUT", "NOTES", "SCHEMA", "STATIC_CASES", "STUDIES", "SWEEP_NUS", "SWEEP_STRAINS", "UNITS",
            "run_validation", "versions"]
 
 SCHEMA = "volspring-validate/1"
 STATIC_CASES = ("cantilever_gravity", "cantilever_end_load", "hanging_bar", "uniaxial_compression")
 BUILT_IN = STATIC_CASES + ("cantilever_modes",)
+#: The held-out shapes (:mod:`validation.heldout`): in the ladder of the full run (``--quick`` leaves them out
+#: unless named), at nu 0.3 on their stored meshes.
+HELDOUT = HELDOUT_CASE_NAMES
 STUDIES = ("refinement", "speed", "cauchy")
 #: Poisson ratios and axial strains of the compression sweep (volume change against strain).
 SWEEP_NUS = (0.0, 0.3, 0.45, 0.49)
@@ -52,6 +70,8 @@ UNITS = {"_m": "metre", "_m3": "cubic metre", "_hz": "hertz", "_pa": "pascal", "
 NOTES = [
     "Spring stiffness rules: van_gelder and lloyd from E (nu is not used by either rule); uniform gives every "
     "spring one constant, the mean van_gelder constant of the same mesh.",
+    "The ladder: every rung of volspring.ladder.MODELS through volspring's own static, modal and implicit solvers; "
+    "the springs rung uses the default rule (van_gelder), so its rows are the springs: van_gelder rows.",
     "Spring statics: Newton on the nonlinear springs (volspring.statics) where the clamps hold whole nodes; the "
     "compression case has sliding supports, which volspring.Pins cannot hold, so its spring side is the "
     "linearised solve with the rest stiffness (exact in the small-strain limit).",
@@ -85,8 +105,10 @@ def _settings(quick: bool) -> dict:
     """What ``--quick`` trims. The speed study runs five periods of the loaded mode with a drag that
     leaves 5e-5 of the motion at the end (a damping ratio of 0.32): its cost is the step count, so
     the full run's finer beam (twice omega_max, half the critical step) gets the same simulated
-    time, not more. Measured on 2 cores: quick about 25 s, full about 90 s (three quarters of it the
-    speed study; up to 3 minutes on a shared machine)."""
+    time, not more. Measured on 2 cores: quick about 15-25 s, full about 90 s (three quarters of it the
+    speed study; up to 3 minutes on a shared machine). The ladder adds about 2 s to the quick run (the
+    rungs on the coarse built-in cases; the held-out shapes are in the full run only) and about 15 s to
+    the full one."""
     if quick:
         return {"refinement_levels": (1, 2), "reference_level": 4, "speed_per_height": 1,
                 "speed_steps": studies.QUICK_INTEGRATOR_STEPS, "speed_periods": 5.0,
@@ -96,17 +118,19 @@ def _settings(quick: bool) -> dict:
             "cauchy_cells": 4}
 
 
-def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULES, folder=None,
+def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULES, models=MODELS, folder=None,
                    progress=None) -> tuple:
-    """Run cases and studies.
+    """Run cases, the ladder and studies.
 
     Parameters
     ----------
-    cases : sequence of str, optional -- built-in case and study names (``BUILT_IN`` and ``STUDIES``);
-        default all of them, or none when ``own_case`` is given
-    quick : bool -- coarse meshes and short runs (about a minute in all)
+    cases : sequence of str, optional -- built-in case, held-out case and study names (``BUILT_IN``,
+        ``HELDOUT`` and ``STUDIES``); default all of them (the held-out shapes not with ``quick``), or none
+        when ``own_case`` is given
+    quick : bool -- coarse meshes and short runs (about half a minute in all)
     own_case : Case, optional -- a user's mesh (:func:`validation.cases.own_mesh_case`)
     rules : sequence of str -- spring stiffness rules
+    models : sequence of str -- rungs of the ladder (:data:`volspring.ladder.MODELS`), at least one
     folder : path, optional -- FEM cache folder
     progress : callable, optional -- ``progress(fraction, message)``, fraction in [0, 1]
 
@@ -115,16 +139,19 @@ def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULE
     (results, artefacts) -- results: JSON-ready dict (module docstring); artefacts: the
     :class:`~validation.compare.Comparison` of each case, for VTU files
     """
+    known = BUILT_IN + HELDOUT + STUDIES
     if cases is None or len(cases) == 0:
-        cases = () if own_case is not None else BUILT_IN + STUDIES
-    unknown = [name for name in cases if name not in BUILT_IN + STUDIES]
+        cases = () if own_case is not None else BUILT_IN + (() if quick else HELDOUT) + STUDIES
+    unknown = [name for name in cases if name not in known]
     if unknown:
-        raise ValueError(f"unknown case {unknown[0]!r}; known: {', '.join(BUILT_IN + STUDIES)}")
+        raise ValueError(f"unknown case {unknown[0]!r}; known: {', '.join(known)}")
+    models = ladder.parse_models(models)
     settings = _settings(quick)
     weights = {"cantilever_gravity": 1, "cantilever_end_load": 1, "hanging_bar": 1, "uniaxial_compression": 2,
-               "cantilever_modes": 1, "refinement": 4, "speed": 12 if quick else 40, "cauchy": 1, "own_mesh": 3}
+               "cantilever_modes": 1, "refinement": 4, "speed": 12 if quick else 40, "cauchy": 1, "own_mesh": 3,
+               "ladder": 2, **{name: 3 for name in HELDOUT}}
     tasks = list(cases) + (["own_mesh"] if own_case is not None else [])
-    total = float(sum(weights[name] for name in tasks))
+    total = float(sum(weights[name] for name in tasks) + weights["ladder"])
     done = 0.0
     report = progress or (lambda fraction, message: None)
 
@@ -133,23 +160,30 @@ def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULE
 
     results = {"schema": SCHEMA, "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                "quick": bool(quick), "versions": versions(), "units": UNITS, "notes": NOTES, "rules": list(rules),
+               "models": list(models),
                "settings": {key: value for key, value in settings.items() if key != "speed_steps"},
                "cases": {}, "studies": {}}
     results["settings"]["speed_steps"] = {key: list(value) for key, value in settings["speed_steps"].items()}
     artefacts = {}
+    on_ladder, held_out = [], []  # comparisons made here with the rungs; held-out cases the ladder compares
     for name in tasks:
         note(name)
         if name in STATIC_CASES or name == "own_mesh":
             case = own_case if name == "own_mesh" else build_case(name, quick=quick)
-            comparison = compare_static(case, rules=rules, folder=folder, progress=note)
+            comparison = compare_static(case, rules=rules, models=models, folder=folder, progress=note)
             results["cases"][name] = comparison.results
             artefacts[name] = comparison
+            on_ladder.append(comparison)
             if name == "uniaxial_compression":
                 results["cases"][name]["sweep"] = _compression_sweep(quick, rules, folder, note)
         elif name == "cantilever_modes":
-            comparison = compare_modes(build_case(name, quick=quick), rules=rules, folder=folder, progress=note)
+            comparison = compare_modes(build_case(name, quick=quick), rules=rules, models=models, folder=folder,
+                                       progress=note)
             results["cases"][name] = comparison.results
             artefacts[name] = comparison
+            on_ladder.append(comparison)
+        elif name in HELDOUT:
+            held_out.append(build_case(name))
         elif name == "refinement":
             results["studies"]["refinement"] = studies.refinement_study(
                 settings["refinement_levels"], reference_level=settings["reference_level"], rules=rules,
@@ -161,7 +195,10 @@ def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULE
                 folder=folder, progress=note)
         elif name == "cauchy":
             results["studies"]["cauchy"] = studies.cauchy_study(cells=settings["cauchy_cells"], rules=rules)
-        done += weights[name]
+        if name not in HELDOUT:
+            done += weights[name]
+    results["ladder"] = ladder.run_ladder(held_out, comparisons=on_ladder, models=models, folder=folder,
+                                          cells=settings["cauchy_cells"], progress=note)
     results["headline"] = _headline(results, rules)
     report(1.0, "done")
     return results, artefacts
