@@ -86,7 +86,9 @@ def cache_key(kind: str, mesh, material, *, clamp, gravity=None, traction=None, 
     kind : {"static", "modes"}
     mesh, material, clamp, gravity, traction, point_loads, element
         As for :func:`validation.fem.solve_fem_static`; clamps and tractions are resolved on the mesh
-        first, so equal selections give equal keys however they were written.
+        first, so equal selections give equal keys however they were written. ``element`` (one of
+        :data:`validation.fem_assembly.ELEMENTS`: "P1", "P2", "TH") is part of the key, so a Taylor-Hood
+        answer and a P2 one on the same P2 displacement space are stored apart.
     **options
         Further plain values that change the answer (``count``, ``mass`` for modes).
 

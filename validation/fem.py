@@ -8,7 +8,13 @@ The data path reads in one direction, one module per step::
         ->  StaticSolution / ModalSolution (arrays on the mesh nodes, here)
 
 P2 tetrahedra are the default reference: P1 tetrahedra lock in bending (a cantilever of
-10 x 1 x 1 cells deflects to 0.22 of the converged value, REFERENCE.md section 2).
+10 x 1 x 1 cells deflects to 0.22 of the converged value, REFERENCE.md section 2). P2 still locks
+mildly as nu -> 1/2: on the held-out shapes it is 1-3% too stiff at nu = 0.45 and 2-5% at 0.499
+against a converged answer (``benchmarks/study_locking.py``). ``element="TH"`` (Taylor-Hood: P2
+displacement, continuous P1 pressure, the mixed u-p form of
+:func:`validation.fem_assembly.mixed_matrices`) does not lock: on the same mesh it stays within
+0.5-1.4% of converged at every nu (3.5% on the coarse bunny). It is solved by sparse LU only (the
+system is indefinite); its modes condense the pressure out.
 Points are ``(n, 3)`` everywhere here and become scikit-fem's ``(3, n)`` only in
 :func:`validation.fem_assembly.skfem_space`.
 
@@ -31,6 +37,13 @@ uniaxial stress, so the strain is 1e-3 along x and -nu * 1e-3 across, which P1 r
 array([ 0.001 , -0.0003, -0.0003])
 >>> round(solution.volume_change, 9)    # (1 - 2 nu) eps V [m^3]
 0.0004
+
+Taylor-Hood keeps it exact when nearly incompressible (P1 and P2 do too here: a uniform strain
+does not lock; bending does):
+
+>>> solution = solve_fem_static(cube, (1e6, 0.499, 1000.0), clamp=symmetry, traction=pull, element="TH")
+>>> solution.displacement[7].round(9)
+array([ 0.001   , -0.000499, -0.000499])
 """
 
 from __future__ import annotations
@@ -46,12 +59,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from skfem import Functional, asm
 from skfem.helpers import div
+from skfem.models.elasticity import lame_parameters
 
 from meshing.geometry import rigid_body_modes, signed_tet_volumes
 from validation.boundary import resolve_clamps, resolve_point_loads, resolve_tractions
-from validation.fem_assembly import (check_element, fixed_vector, load_vector, mass_matrix, p1_prolongation,
-                                     skfem_space, fem_stiffness_matrix)
-from validation.fem_solvers import AMG_TOLERANCE, ReferenceInfo, solve_linear
+from validation.fem_assembly import (ELEMENTS, check_element, fixed_vector, load_vector, mass_matrix, mixed_matrices,
+                                     p1_prolongation, pressure_basis, skfem_space, fem_stiffness_matrix)
+from validation.fem_solvers import AMG_TOLERANCE, ReferenceInfo, solve_linear, solve_saddle_point
 
 __all__ = [
     "ModalSolution",
@@ -111,16 +125,17 @@ class StaticSolution:
 
     Attributes
     ----------
-    displacement : (n, 3) float -- displacement of each mesh node [m] (P2: its vertex dofs)
+    displacement : (n, 3) float -- displacement of each mesh node [m] (P2, TH: the vertex dofs)
     volume_change : float -- linearised volume change, the integral of div u over the mesh [m^3],
         exact for the finite-element field (it equals the flux of u through the boundary)
     deformed_volume_change : float -- volume of the mesh with its nodes moved by ``displacement``
         minus its rest volume [m^3]: what a node-based model (springs) measures; it differs from
-        ``volume_change`` by O(|grad u|^2) terms, and for P2 it ignores the edge dofs
+        ``volume_change`` by O(|grad u|^2) terms, and for P2 and TH it ignores the edge dofs
     reaction_force : (3,) float -- total force the clamps exert on the body [N]; at equilibrium
         minus the total applied load
-    dofs : (N,) float -- the whole finite-element vector, in scikit-fem's dof order [m]
-    element : str -- ``"P1"`` or ``"P2"``
+    dofs : (N,) float -- the whole finite-element displacement vector, in scikit-fem's dof order [m]
+        (TH: its P2 displacement; the pressure is not kept)
+    element : str -- ``"P1"``, ``"P2"`` or ``"TH"``
     info : ReferenceInfo
     """
 
@@ -152,11 +167,12 @@ def solve_fem_static(mesh, material, *, clamp, gravity=None, traction=None, poin
         (a point force on a continuum has no finite limit under refinement: use tractions for
         references that must converge)
     body_force : callable (k, 3) float -> (k, 3) float, optional -- extra force per volume [N/m^3]
-    element : {"P2", "P1"}
+    element : {"P2", "P1", "TH"} -- displacement P2 or P1 tets, or Taylor-Hood P2-P1 (P2 displacement,
+        continuous P1 pressure: free of volumetric locking as nu -> 1/2; needs nu > 0)
     solver : {"auto", "direct", "amg"} -- ``"auto"`` is sparse LU up to
         :data:`~validation.fem_solvers.DIRECT_DOF_LIMIT` free dofs, else CG preconditioned by
         smoothed-aggregation AMG with the six rigid-body modes as near-null space (for P2 inside a
-        P2 -> P1 two-level cycle)
+        P2 -> P1 two-level cycle). TH is indefinite: always sparse LU, and ``"amg"`` is refused.
     tolerance : float -- relative residual at which CG stops
 
     Returns
@@ -167,23 +183,44 @@ def solve_fem_static(mesh, material, *, clamp, gravity=None, traction=None, poin
     ------
     ValueError
         For bad material constants, a clamp or traction region without nodes or faces (naming the
-        region and the mesh bounds), or clamps that leave a rigid-body mode free.
+        region and the mesh bounds), clamps that leave a rigid-body mode free, or TH with nu <= 0.
     """
-    element = check_element(element)
+    element = check_element(element, ELEMENTS)
     E, nu, density = elastic_constants(material)
+    _check_taylor_hood_nu(element, E, nu)
     start = time.perf_counter()
     fixed = resolve_clamps(mesh, clamp)
     tractions = resolve_tractions(mesh, traction)
     point_forces = resolve_point_loads(mesh, point_loads)
     space = skfem_space(mesh, element)
-    K = fem_stiffness_matrix(space, E, nu)
     load = load_vector(space, density, gravity, body_force, tractions, point_forces)
     is_fixed, u = fixed_vector(space, fixed)
+    free = ~is_fixed
+    if element == "TH":
+        u, internal, solve, sizes, assembled = _solve_taylor_hood(mesh, space, E, nu, load, is_fixed, u, solver)
+    else:
+        u, internal, solve, sizes, assembled = _solve_displacement(mesh, space, E, nu, load, is_fixed, u, solver,
+                                                                   tolerance)
+    reaction = np.bincount(space.components[is_fixed], weights=(internal - load)[is_fixed], minlength=3)
+    volume_change = asm(Functional(lambda w: div(w["u"])), space.basis, u=space.basis.interpolate(u))
+    displacement = u[space.node_dofs]
+    deformed = signed_tet_volumes(mesh.points + displacement, mesh.tets).sum() - mesh.volume
+    info = ReferenceInfo(**dataclasses.asdict(solve), dof_count=sizes[0], free_dof_count=sizes[1],
+                         assemble_seconds=assembled - start)
+    logger.info("%s static solve: %d dofs, %s, %d iterations, residual %.2g, %.2f s assembly + %.2f s solve",
+                element, info.dof_count, info.method, info.iterations, info.residual, info.assemble_seconds,
+                info.setup_seconds + info.solve_seconds)
+    return StaticSolution(displacement, float(volume_change), float(deformed), reaction, u, element, info)
+
+
+def _solve_displacement(mesh, space, E, nu, load, is_fixed, u, solver, tolerance):
+    """P1 or P2: K u = f on the free dofs. Returns (u, K u, SolveInfo, (dofs, free dofs), time assembled)."""
+    K = fem_stiffness_matrix(space, E, nu)
     free = ~is_fixed
     K_free = K[free][:, free]
     rhs = load[free] - K[free][:, is_fixed] @ u[is_fixed]
     coarse, prolongation = free, None
-    if element == "P2":
+    if space.element == "P2":
         coarse = np.zeros_like(free)
         coarse[space.node_dofs] = free[space.node_dofs]
         prolongation = p1_prolongation(mesh, space)[free][:, coarse]
@@ -193,16 +230,36 @@ def solve_fem_static(mesh, material, *, clamp, gravity=None, traction=None, poin
     assembled = time.perf_counter()
     u[free], solve = solve_linear(K_free, rhs, solver=solver, tolerance=tolerance, rigid_modes=modes,
                                   prolongation=prolongation)
-    reaction = np.bincount(space.components[is_fixed], weights=(K @ u - load)[is_fixed], minlength=3)
-    volume_change = asm(Functional(lambda w: div(w["u"])), space.basis, u=space.basis.interpolate(u))
-    displacement = u[space.node_dofs]
-    deformed = signed_tet_volumes(mesh.points + displacement, mesh.tets).sum() - mesh.volume
-    info = ReferenceInfo(**dataclasses.asdict(solve), dof_count=int(K.shape[0]), free_dof_count=int(free.sum()),
-                         assemble_seconds=assembled - start)
-    logger.info("%s static solve: %d dofs, %s, %d iterations, residual %.2g, %.2f s assembly + %.2f s solve",
-                element, info.dof_count, info.method, info.iterations, info.residual, info.assemble_seconds,
-                info.setup_seconds + info.solve_seconds)
-    return StaticSolution(displacement, float(volume_change), float(deformed), reaction, u, element, info)
+    return u, K @ u, solve, (int(K.shape[0]), int(free.sum())), assembled
+
+
+def _taylor_hood_system(mesh, space, E, nu, free):
+    """The condensed, scaled TH matrix ``[[A_ff, -s B_f^T], [-s B_f, -s^2 C / lambda]]`` (free displacement dofs,
+    then every pressure dof p / s), the blocks (A, B, C) of :func:`~validation.fem_assembly.mixed_matrices`
+    on all dofs, and the scale s [Pa/m]."""
+    lam, mu = lame_parameters(E, nu)
+    A, B, C = mixed_matrices(space, pressure_basis(space), mu)
+    # Unknown p / s with s = mu / h (h the mean edge length), its row times s: then the three blocks A ~ mu h,
+    # s B ~ mu h and s^2 C / lambda ~ (mu / lambda) mu h are all forces per length, so LU pivots on comparable
+    # entries and the residual check weighs both rows alike (measured LU residuals 1e-11..2e-10 at nu 0.3-0.499).
+    scale = mu / np.linalg.norm(np.diff(mesh.points[mesh.edges], axis=1), axis=-1).mean()
+    B_free = B[:, free]
+    K = sp.bmat([[A[free][:, free], -scale * B_free.T], [-scale * B_free, -(scale**2 / lam) * C]]).tocsr()
+    return K, (A, B, C), scale
+
+
+def _solve_taylor_hood(mesh, space, E, nu, load, is_fixed, u, solver):
+    """TH: the mixed system of :func:`~validation.fem_assembly.mixed_matrices` on the free displacement dofs
+    and every pressure dof. Returns (u, A u - B^T p, SolveInfo, (dofs, free dofs), time assembled)."""
+    free = ~is_fixed
+    K, (A, B, C), scale = _taylor_hood_system(mesh, space, E, nu, free)
+    rhs = np.concatenate([load[free] - A[free][:, is_fixed] @ u[is_fixed], scale * (B[:, is_fixed] @ u[is_fixed])])
+    assembled = time.perf_counter()
+    solution, solve = solve_saddle_point(K, rhs, solver=solver)
+    u[free] = solution[: free.sum()]
+    p = scale * solution[free.sum():]
+    sizes = (int(A.shape[0] + C.shape[0]), int(free.sum() + C.shape[0]))
+    return u, A @ u - B.T @ p, solve, sizes, assembled
 
 
 # ---------------------------------------------------------------------------- modal
@@ -214,7 +271,7 @@ class ModalSolution:
     ----------
     frequencies : (k,) float -- eigenfrequencies, ascending [Hz]
     shapes : (k, n, 3) float -- each mode at the mesh nodes, mass-normalised (phi^T M phi = 1) [kg^-1/2]
-    element : str -- ``"P1"`` or ``"P2"``
+    element : str -- ``"P1"``, ``"P2"`` or ``"TH"``
     mass : str -- ``"consistent"`` or ``"lumped"``
     info : ReferenceInfo -- ``residual`` is the largest ||K phi - lambda M phi|| / ||K phi||
     """
@@ -237,7 +294,9 @@ def solve_fem_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2
     clamp : region, Clamp or list of Clamp -- as for :func:`solve_fem_static`; prescribed
         displacements are ignored (vibration about the clamped rest shape)
     count : int -- number of modes, lowest first
-    element : {"P2", "P1"}
+    element : {"P2", "P1", "TH"} -- for TH the pressure is condensed out: the stiffness is the Schur
+        complement ``A + lambda B^T C^-1 B`` (SPD, never formed), applied through the sparse LU of the
+        mixed matrix in the shift-invert step and through a LU of the pressure mass C elsewhere
     mass : {"consistent", "lumped"} -- lumped is HRZ: the diagonal of the consistent mass scaled
         to keep the total mass (row sums would give P2 vertices negative masses). On affine tets
         every element's diagonal has the same proportions, so one global scale is exact HRZ.
@@ -245,28 +304,40 @@ def solve_fem_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2
     Returns
     -------
     ModalSolution
+
+    Raises
+    ------
+    ValueError
+        For an unknown element or mass, ``count`` out of range, or TH with nu <= 0.
     """
-    element = check_element(element)
+    element = check_element(element, ELEMENTS)
     if mass not in ("consistent", "lumped"):
         raise ValueError(f"mass = {mass!r} is not 'consistent' or 'lumped'")
     E, nu, density = elastic_constants(material)
+    _check_taylor_hood_nu(element, E, nu)
     start = time.perf_counter()
     fixed = resolve_clamps(mesh, clamp)
     space = skfem_space(mesh, element)
-    K = fem_stiffness_matrix(space, E, nu)
     M = mass_matrix(space, density)
     if mass == "lumped":
         diagonal = M.diagonal()
         M = sp.diags(diagonal * (3 * density * mesh.volume / diagonal.sum())).tocsr()
     free = ~fixed_vector(space, fixed)[0]
-    K_free, M_free = K[free][:, free], M[free][:, free]
-    if not 1 <= count < K_free.shape[0]:
-        raise ValueError(f"count = {count} modes is not between 1 and {K_free.shape[0] - 1} (free dofs - 1)")
+    M_free = M[free][:, free]
+    if not 1 <= count < M_free.shape[0]:
+        raise ValueError(f"count = {count} modes is not between 1 and {M_free.shape[0] - 1} (free dofs - 1)")
+    inverse = None
+    if element == "TH":
+        K_free, inverse, dof_count = _taylor_hood_condensed(mesh, space, E, nu, free)
+    else:
+        K = fem_stiffness_matrix(space, E, nu)
+        K_free, dof_count = K[free][:, free].tocsc(), K.shape[0]
     assembled = time.perf_counter()
     # A start vector from a seeded local generator: without v0, ARPACK draws one from a hidden
     # generator whose state persists between calls, so two identical solves differed (by 2e-14).
-    start = np.random.default_rng(0).standard_normal(K_free.shape[0])
-    eigenvalues, vectors = spla.eigsh(K_free.tocsc(), k=count, M=M_free.tocsc(), sigma=0.0, which="LM", v0=start)
+    initial = np.random.default_rng(0).standard_normal(M_free.shape[0])
+    eigenvalues, vectors = spla.eigsh(K_free, k=count, M=M_free.tocsc(), sigma=0.0, which="LM", v0=initial,
+                                      OPinv=inverse)
     order = np.argsort(eigenvalues)
     eigenvalues, vectors = eigenvalues[order], vectors[:, order]
     solved = time.perf_counter()
@@ -277,12 +348,36 @@ def solve_fem_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2
     full[free] = vectors
     shapes = np.moveaxis(full[space.node_dofs], -1, 0)
     # converged: eigsh raises unless it converged to its tolerance 0, i.e. machine precision.
-    info = ReferenceInfo("eigsh", 0, residual, True, 0.0, solve_seconds=solved - assembled, dof_count=int(K.shape[0]),
+    info = ReferenceInfo("eigsh", 0, residual, True, 0.0, solve_seconds=solved - assembled, dof_count=int(dof_count),
                          free_dof_count=int(free.sum()), assemble_seconds=assembled - start)
     frequencies = np.sqrt(np.clip(eigenvalues, 0.0, None)) / (2 * np.pi)
     logger.info("%s modes (%s mass): %s Hz, %.2f s assembly + %.2f s solve", element, mass,
                 np.array2string(frequencies, precision=4), info.assemble_seconds, info.solve_seconds)
     return ModalSolution(frequencies, shapes, element, mass, info)
+
+
+def _taylor_hood_condensed(mesh, space, E, nu, free):
+    """TH with the pressure condensed: (the Schur complement A_ff + lambda B_f^T C^-1 B_f as a LinearOperator,
+    its inverse through the LU of the mixed matrix as a LinearOperator, the dof count u + p)."""
+    K, (A, B, C), _ = _taylor_hood_system(mesh, space, E, nu, free)
+    lam = lame_parameters(E, nu)[0]
+    free_count, pressure_count = int(free.sum()), C.shape[0]
+    mixed, mass = spla.splu(K.tocsc()), spla.splu(C.tocsc())
+    A_free, B_free = A[free][:, free], B[:, free]
+    # Row 2 of the mixed system gives p = -lambda C^-1 B u; row 1 then reads (A + lambda B^T C^-1 B) u = f.
+    # Its inverse is the u part of the mixed solve with load (f, 0): the p / s scaling does not change u.
+    schur = spla.LinearOperator((free_count, free_count), dtype=float,
+                                matvec=lambda u: A_free @ u + lam * (B_free.T @ mass.solve(B_free @ u)))
+    inverse = spla.LinearOperator((free_count, free_count), dtype=float,
+                                  matvec=lambda f: mixed.solve(np.concatenate([f, np.zeros(pressure_count)]))
+                                  [:free_count])
+    return schur, inverse, A.shape[0] + pressure_count
+
+
+def _check_taylor_hood_nu(element, E, nu):
+    if element == "TH" and not nu > 0:
+        raise ValueError(f"nu = {nu:g} is not > 0, which element 'TH' needs (its pressure equation divides by "
+                         f"lambda = {lame_parameters(E, nu)[0]:g} Pa); use element='P2'")
 
 
 # ---------------------------------------------------------------------------- error norms
@@ -300,7 +395,7 @@ def error_norms(mesh, solution: StaticSolution, displacement: Callable, gradient
     -------
     (l2, h1) : float -- sqrt(int |u_h - u|^2) [m^2.5] and sqrt(int |grad(u_h - u)|^2) [m^1.5], the
         second equivalent to the energy norm. Optimal rates in the mesh size h: P1 h^2 and h,
-        P2 h^3 and h^2.
+        P2 and TH h^3 and h^2.
     """
     space = skfem_space(mesh, solution.element)
     basis = space.with_intorder(2 * space.order + 2)

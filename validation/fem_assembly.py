@@ -1,5 +1,10 @@
 """The scikit-fem side of the reference: vector P1/P2 spaces on a TetMesh and the assembled system.
 
+Three elements (:data:`ELEMENTS`): ``"P1"`` and ``"P2"`` displacement tetrahedra, and ``"TH"``,
+Taylor-Hood P2-P1: P2 displacement (the same vector space as ``"P2"``) with a continuous P1 pressure
+(:func:`pressure_basis`) in the mixed u-p form of :func:`mixed_matrices`, which does not lock as
+nu -> 1/2.
+
 The TetMesh's ``(n, 3)`` points become scikit-fem's ``(3, n)`` only in :func:`skfem_space`, which
 also records where each dof sits in TetMesh terms (nodes, edges, components), so the fixed dofs
 and loads resolved by :mod:`validation.boundary` map onto the finite-element vector without
@@ -28,29 +33,43 @@ import numpy as np
 import scipy.sparse as sp
 from skfem import (Basis, BilinearForm, ElementTetP1, ElementTetP2, ElementVector, FacetBasis, LinearForm, MeshTet,
                    asm)
-from skfem.helpers import dot
+from skfem.helpers import ddot, div, dot, sym_grad
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from validation.boundary import FixedDofs, evaluate_vectors
 
 __all__ = [
+    "DISPLACEMENT_ELEMENTS",
+    "ELEMENTS",
     "Space",
     "check_element",
     "fixed_vector",
     "load_vector",
     "mass_matrix",
+    "mixed_matrices",
     "p1_prolongation",
+    "pressure_basis",
     "skfem_space",
     "fem_stiffness_matrix",
 ]
 
-_ELEMENTS = {"P1": ElementTetP1, "P2": ElementTetP2}
+#: Every element the linear reference knows: P1 and P2 displacement tets, and Taylor-Hood P2-P1 (``"TH"``).
+ELEMENTS = ("P1", "P2", "TH")
+#: The pure-displacement elements: those with a single stiffness matrix (what the nonlinear reference
+#: and the AMG solver handle).
+DISPLACEMENT_ELEMENTS = ("P1", "P2")
+# The scalar element of each displacement component, and its polynomial order.
+_COMPONENT_ELEMENTS = {"P1": (ElementTetP1, 1), "P2": (ElementTetP2, 2), "TH": (ElementTetP2, 2)}
 
 
-def check_element(element: str) -> str:
-    """``element`` if it is ``"P1"`` or ``"P2"``, else a ValueError naming it."""
-    if element not in _ELEMENTS:
-        raise ValueError(f"element = {element!r} is not one of {sorted(_ELEMENTS)}")
+def check_element(element: str, allowed: tuple = DISPLACEMENT_ELEMENTS) -> str:
+    """``element`` if it is one of ``allowed`` (by default ``"P1"`` or ``"P2"``), else a ValueError naming it.
+
+    The default leaves ``"TH"`` out, so a caller built on one stiffness matrix refuses it; the linear
+    reference (:mod:`validation.fem`) passes ``allowed=ELEMENTS``.
+    """
+    if element not in allowed:
+        raise ValueError(f"element = {element!r} is not one of {list(allowed)}")
     return element
 
 
@@ -68,34 +87,38 @@ def _matching_rows(ours: np.ndarray, theirs: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Space:
-    """A vector P1/P2 scikit-fem basis on a TetMesh and where its dofs sit in TetMesh terms."""
+    """A vector P1/P2 scikit-fem basis on a TetMesh and where its dofs sit in TetMesh terms.
+
+    For ``element="TH"`` it is the P2 displacement space of the Taylor-Hood pair.
+    """
 
     element: str
     basis: Basis
     node_dofs: np.ndarray  # (n, 3) int -- the dof of component c at node i
-    edge_dofs: np.ndarray  # (e, 3) int -- the same for each of mesh.edges (P2); (0, 3) for P1
+    edge_dofs: np.ndarray  # (e, 3) int -- the same for each of mesh.edges (P2, TH); (0, 3) for P1
     components: np.ndarray  # (N,) int -- the component (0, 1, 2) of each dof
 
     @property
     def order(self) -> int:
-        return int(self.element[1])
+        """Polynomial order of the displacement: 1 (P1) or 2 (P2, TH)."""
+        return _COMPONENT_ELEMENTS[self.element][1]
 
     def with_intorder(self, intorder: int) -> Basis:
         return Basis(self.basis.mesh, self.basis.elem, intorder=intorder)
 
 
 def skfem_space(mesh, element: str) -> Space:
-    """The vector ``element`` ("P1" or "P2") space on a TetMesh, with its dofs located on the mesh."""
+    """The vector displacement space of ``element`` ("P1", "P2", or "TH": P2) on a TetMesh, its dofs located."""
     # The only place where the (n, 3) points become scikit-fem's (3, n).
     skmesh = MeshTet(np.ascontiguousarray(mesh.points.T), np.ascontiguousarray(mesh.tets.T))
-    order = int(element[1])
+    component, order = _COMPONENT_ELEMENTS[check_element(element, ELEMENTS)]
     # Gradients of P_k are P_(k-1) on affine tets, so order 2(k-1) integrates the stiffness exactly and
     # order k a constant body force. Order k costs a tenth of scikit-fem's default 2k for P2 (0.45 s
     # against 5.2 s at 525 nodes) and gives the same matrix to 1e-15.
-    basis = Basis(skmesh, ElementVector(_ELEMENTS[element]()), intorder=order)
+    basis = Basis(skmesh, ElementVector(component()), intorder=order)
     node_dofs = basis.nodal_dofs.T
     edge_dofs = np.zeros((0, 3), dtype=np.int64)
-    if element == "P2":
+    if order == 2:
         edge_dofs = basis.edge_dofs.T[_matching_rows(mesh.edges, np.sort(skmesh.edges, axis=0).T)]
     components = np.empty(basis.N, dtype=np.int64)
     for dofs in (node_dofs, edge_dofs):
@@ -108,7 +131,7 @@ def fixed_vector(space: Space, fixed: FixedDofs) -> tuple[np.ndarray, np.ndarray
     mask, values = np.zeros(space.basis.N, bool), np.zeros(space.basis.N)
     mask[space.node_dofs[fixed.node_mask]] = True
     values[space.node_dofs[fixed.node_mask]] = fixed.node_values[fixed.node_mask]
-    if space.element == "P2":
+    if space.order == 2:
         mask[space.edge_dofs[fixed.edge_mask]] = True
         values[space.edge_dofs[fixed.edge_mask]] = fixed.edge_values[fixed.edge_mask]
     return mask, values
@@ -117,6 +140,49 @@ def fixed_vector(space: Space, fixed: FixedDofs) -> tuple[np.ndarray, np.ndarray
 def fem_stiffness_matrix(space: Space, E: float, nu: float) -> sp.csr_matrix:
     """(N, N) CSR -- linear-elastic stiffness [N/m] for E [Pa] and nu, at the space's own quadrature order."""
     return asm(linear_elasticity(*lame_parameters(E, nu)), space.basis).tocsr()
+
+
+def pressure_basis(space: Space) -> Basis:
+    """The continuous P1 pressure basis of the Taylor-Hood pair, on ``space``'s mesh and quadrature.
+
+    Its dofs are the mesh nodes in TetMesh order (scikit-fem keeps the vertex numbering), and it
+    shares ``space``'s quadrature (order 2, as :func:`skfem_space` chooses for P2), as the mixed forms of
+    :func:`mixed_matrices` need.
+    """
+    if space.order != 2:
+        raise ValueError(f"the Taylor-Hood pressure pairs with a P2 displacement, not {space.element}")
+    return Basis(space.basis.mesh, ElementTetP1(), intorder=space.order)
+
+
+def mixed_matrices(space: Space, pressure: Basis, mu: float) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+    """The blocks of the Taylor-Hood u-p form of linear elasticity.
+
+    The mixed problem is: find u (P2) and p (P1) with, for every v and q,
+    ``2 mu (eps u, eps v) - (p, div v) = l(v)`` and ``-(div u, q) - (p, q) / lambda = 0``, i.e.
+    ``[[A, -B^T], [-B, -C / lambda]] [u; p] = [f; 0]`` (symmetric, indefinite): p = -lambda div u
+    is the pressure [Pa], positive in compression. As lambda -> infinity the second row becomes
+    the incompressibility constraint and the pair stays stable (inf-sup), so the answer does not lock.
+
+    Parameters
+    ----------
+    space : Space
+        The P2 displacement space (``"TH"`` or ``"P2"``).
+    pressure : skfem Basis
+        :func:`pressure_basis` of ``space``.
+    mu : float
+        Shear modulus [Pa].
+
+    Returns
+    -------
+    A : (N, N) CSR -- ``2 mu (eps u, eps v)`` [N/m]
+    B : (n, N) CSR -- ``(div u, q)`` [m^2]
+    C : (n, n) CSR -- ``(p, q)``, the P1 mass matrix [m^3]
+    """
+    # eps(P2) and div(P2) are P1 on affine tets: every integrand is quadratic, exact at order 2.
+    A = asm(BilinearForm(lambda u, v, w: 2 * mu * ddot(sym_grad(u), sym_grad(v))), space.basis)
+    B = asm(BilinearForm(lambda u, q, w: div(u) * q), space.basis, pressure)
+    C = asm(BilinearForm(lambda p, q, w: p * q), pressure)
+    return A.tocsr(), B.tocsr(), C.tocsr()
 
 
 def mass_matrix(space: Space, density: float) -> sp.csr_matrix:
