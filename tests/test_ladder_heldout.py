@@ -1,9 +1,14 @@
 """The ladder on shapes the project's beams never saw (torus, capsule, L-bracket, the bunny).
 
-Same-mesh P2 is the reference; on these meshes P1 is 33-66% short of it (tests/test_heldout_cases.py).
-The bounds below are what the smoothed rung achieves today (benchmarks/study_alpha.py), a regression
-floor: the issue's goal (3%) is not met on every shape yet, see the README's ladder section.
+The reference is Taylor-Hood P2-P1 on the same mesh (``validation.fem``, ``element="TH"``): it does not
+lock, and it is within 0.5-1.4% of the converged answer on the torus, capsule and L-bracket (3.5% on the
+coarse bunny), where same-mesh P2 is itself 1-5% too stiff at nu 0.45-0.499 (benchmarks/study_locking.py).
+On these meshes P1 is 33-66% short of it (tests/test_heldout_cases.py). The deflection bounds are what the
+smoothed rung achieves today (benchmarks/study_alpha.py), a regression floor: the issue's 3% goal is not
+met on every shape; the locking goal is checked where it is met and kept as a strict xfail where it is not.
 """
+
+import functools
 
 import numpy as np
 import pytest
@@ -14,22 +19,38 @@ from validation.springs import spring_static
 from volspring import Model
 
 
+@functools.lru_cache(maxsize=None)
 def _ratios(name, nu):
     case = build_heldout_case(name, nu=nu)
-    p2 = solve_fem_static(case.mesh, case.material_tuple, element="P2", **case.fem_arguments())
-    k = int(np.argmax(np.linalg.norm(p2.displacement, axis=1)))
-    direction = p2.displacement[k] / np.linalg.norm(p2.displacement[k])
+    reference = solve_fem_static(case.mesh, case.material_tuple, element="TH", **case.fem_arguments()).displacement
+    k = int(np.argmax(np.linalg.norm(reference, axis=1)))
+    direction = reference[k] / np.linalg.norm(reference[k])
     ratios = {}
     for rung in ("springs", "smoothed"):
         u = spring_static(case, Model.from_mesh(case.mesh, case.material, model=rung)).displacement
-        ratios[rung] = float(u[k] @ direction / (p2.displacement[k] @ direction))
+        ratios[rung] = float(u[k] @ direction / (reference[k] @ direction))
     return ratios
 
 
 @pytest.mark.parametrize("name", HELDOUT_CASE_NAMES)
 @pytest.mark.parametrize("nu", [0.3, 0.49])
-def test_smoothed_rung_tracks_p2_where_springs_do_not(name, nu):
+def test_smoothed_rung_tracks_the_reference_where_springs_do_not(name, nu):
     ratios = _ratios(name, nu)
-    # Measured at alpha 0.65: 0.958-1.052 over these 8 runs; springs 0.67-0.81.
-    assert abs(ratios["smoothed"] - 1) < 0.06
-    assert abs(ratios["smoothed"] - 1) < 0.5 * abs(ratios["springs"] - 1)
+    # Measured at alpha 0.65: 0.958-1.063 over these 8 runs (capsule 1.063 at nu 0.3, torus 0.958 at 0.49);
+    # springs 0.65-0.81.
+    assert abs(ratios["smoothed"] - 1) < 0.07
+    assert abs(ratios["smoothed"] - 1) < 0.4 * abs(ratios["springs"] - 1)
+
+
+_DRIFT_MISSES = {"capsule_gravity": "measured -7.7%: the volume constraints of domains at the clamped end cap",
+                 "bunny_gravity": "measured -5.3% (1.034 -> 0.979): 699 nodes, mostly on the surface"}
+
+
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=_DRIFT_MISSES[name]))
+                                  if name in _DRIFT_MISSES else name for name in HELDOUT_CASE_NAMES])
+def test_no_locking_from_nu_045_to_0499(name):
+    """The issue's goal: the deflection ratio moves by less than 3% from nu 0.45 to 0.499 (P1 loses over 40%).
+    Measured with volume on node pairs: torus -1.4%, L-bracket -1.8% (volume on single nodes: -4.2%, -6.9%
+    against the converged reference)."""
+    drift = _ratios(name, 0.499)["smoothed"] / _ratios(name, 0.45)["smoothed"] - 1
+    assert abs(drift) < 0.03, drift

@@ -67,14 +67,14 @@ def test_smoothed_rung_has_the_asked_constants_and_beats_springs_on_the_cube(cub
 
 
 def test_constants_once_per_rung_and_nu_with_the_refusal_below_the_networks_nu():
-    constants = rung_constants(MODELS, (0.2, 0.45, 0.49), cells=2)
-    assert set(constants) == set(MODELS) and all(set(by_nu) == {"0.2", "0.45", "0.49"} for by_nu in constants.values())
-    for nu in ("0.2", "0.45", "0.49"):
+    constants = rung_constants(MODELS, (0.05, 0.45, 0.49), cells=2)
+    assert set(constants) == set(MODELS) and all(set(by_nu) == {"0.05", "0.45", "0.49"} for by_nu in constants.values())
+    for nu in ("0.05", "0.45", "0.49"):
         # See the test above: the patch test, to the O(strain) nonlinearity of the measurement.
         assert constants["smoothed"][nu]["nu_effective"] == pytest.approx(float(nu), abs=0.01)
     # Springs: one nu whatever is asked (the Cauchy limit), bit for bit since their rules use E only.
-    assert constants["springs"]["0.2"]["nu_effective"] == constants["springs"]["0.49"]["nu_effective"]
-    assert "cannot reach nu = 0.2" in constants["springs+volume"]["0.2"]["refused"]
+    assert constants["springs"]["0.05"]["nu_effective"] == constants["springs"]["0.49"]["nu_effective"]
+    assert "cannot reach nu = 0.05" in constants["springs+volume"]["0.05"]["refused"]
     assert constants["springs+volume"]["0.45"]["nu_effective"] > constants["springs"]["0.45"]["nu_effective"]
 
 
@@ -89,11 +89,11 @@ def test_smoothed_deflection_error_is_smaller_than_springs_on_the_cantilever(cac
 
 
 def test_a_rung_that_refuses_the_material_is_a_row_not_a_crash(cache_folder):
-    case = uniaxial_compression(cells=2, nu=0.2)
+    case = uniaxial_compression(cells=2, nu=0.05)
     comparison = compare_static(case, rules=(), models=MODELS, elements=("P2",), folder=cache_folder)
     answers = comparison.results["models"]
     assert set(answers["springs+volume"]) == {"refused"}
-    assert "'springs+volume' cannot reach nu = 0.2" in answers["springs+volume"]["refused"]
+    assert "'springs+volume' cannot reach nu = 0.05" in answers["springs+volume"]["refused"]
     assert "\n" not in answers["springs+volume"]["refused"]
     assert np.isfinite(answers["smoothed"]["tip_deflection_error"])
     assert "model_springs+volume" not in comparison.fields["displacement"]
@@ -164,11 +164,24 @@ def test_every_rung_runs_on_your_mesh_and_a_refusal_is_reported(tmp_path):
     mesh_file = tmp_path / "beam.vtu"
     structured_box((4, 1, 1), (1.0, 0.25, 0.25)).write(mesh_file)
     out = tmp_path / "own"
-    status = main(["--mesh", str(mesh_file), "--clamp", "xmin", "--E", "1e8", "--nu", "0.2", "--out", str(out),
+    status = main(["--mesh", str(mesh_file), "--clamp", "xmin", "--E", "1e8", "--nu", "0.05", "--out", str(out),
                    "--cache", str(tmp_path / "cache"), "--no-progress"])
-    assert status == 0  # a rung that refuses nu = 0.2 is a result, not a failure
+    assert status == 0  # a rung that refuses nu = 0.05 is a result, not a failure
     rows = {row["rung"]: row for row in json.loads((out / "results.json").read_text())["ladder"]["rows"]}
     assert list(rows) == list(MODELS)
-    assert "cannot reach nu = 0.2" in rows["springs+volume"]["refused"]
+    assert "cannot reach nu = 0.05" in rows["springs+volume"]["refused"]
     assert np.isfinite(rows["smoothed"]["tip_deflection_error"])
-    assert "refused: model &#x27;springs+volume&#x27; cannot reach nu = 0.2" in (out / "report.html").read_text()
+    assert "refused: model &#x27;springs+volume&#x27; cannot reach nu = 0.05" in (out / "report.html").read_text()
+
+
+def test_held_out_shapes_are_measured_against_taylor_hood(cache_folder):
+    """At nu 0.49 the held-out rows use the locking-free Taylor-Hood reference, and P2 beside it is stiffer
+    (by 1% on the L-bracket: validation.ladder.STATIC_REFERENCE)."""
+    from validation.heldout import build_heldout_case
+
+    ladder = run_ladder([build_heldout_case("l_bracket_gravity", nu=0.49)], models=("smoothed",), steps=1,
+                        folder=cache_folder)
+    (row,) = ladder["rows"]
+    assert row["reference"] == "TH"
+    # Measured 0.993 of TH at alpha 0.65 (benchmarks/study_alpha.py); 3% is the issue's deflection goal.
+    assert abs(row["tip_deflection_error"]) < 0.03

@@ -57,7 +57,7 @@ Every rung of the ladder is stored, its element sets bit for bit:
 ...                            model="smoothed")
 >>> loaded = load_model(save_model(Path(tempfile.mkdtemp()) / "cube.vsmodel.npz", smoothed))
 >>> loaded.rung, [type(element_set).__name__ for element_set in loaded.elements]
-('smoothed', ['CorotatedTets', 'NodalStrain'])
+('smoothed', ['CorotatedTets', 'NodalStrain', 'NodalStrain'])
 """
 
 from __future__ import annotations
@@ -112,8 +112,11 @@ def _nodal_strain_arrays(nodal: NodalStrain) -> dict:
     # Every corner of a tet lies in a domain of the tet's region with the tet's coefficients (the
     # constructor checks it), so corner 0's domain gives back the per-tet inputs exactly.
     corner = nodal.domains.corner_domain[:, 0]
-    return _continuum_common(nodal) | {"shear": nodal.shear[corner], "bulk": nodal.bulk[corner],
-                                       "regions": np.asarray(nodal.domains.region[corner], dtype=np.int64)}
+    arrays = _continuum_common(nodal) | {"shear": nodal.shear[corner], "bulk": nodal.bulk[corner],
+                                         "regions": np.asarray(nodal.domains.region[corner], dtype=np.int64)}
+    if nodal.clusters is not None:
+        arrays["clusters"] = np.asarray(nodal.clusters, dtype=np.int64)
+    return arrays
 
 
 def _continuum_inputs(arrays, path, prefix, rest_positions):
@@ -136,7 +139,11 @@ def _corotated_from_arrays(arrays, path, prefix, rest_positions) -> CorotatedTet
 def _nodal_strain_from_arrays(arrays, path, prefix, rest_positions) -> NodalStrain:
     rest, tets, damping, per_tet = _continuum_inputs(arrays, path, prefix, rest_positions)
     regions = take_array(arrays, prefix + "regions", path, shape=("T",), kind="i")
-    return NodalStrain(rest, tets, per_tet("shear"), per_tet("bulk"), regions=regions, stiffness_damping=damping)
+    clusters = None  # files before node clusters have none: one domain per node
+    if prefix + "clusters" in arrays:
+        clusters = take_array(arrays, prefix + "clusters", path, shape=(len(rest),), kind="i")
+    return NodalStrain(rest, tets, per_tet("shear"), per_tet("bulk"), regions=regions, clusters=clusters,
+                       stiffness_damping=damping)
 
 
 def _check_rebuilt_from(model, index, element_set) -> None:

@@ -237,6 +237,9 @@ class NodalStrain(_TetContinuum):
     bulk : float or (T,) float -- kappa [Pa] >= 0, the volume term's coefficient, per tet
     regions : (T,) int, optional -- material region of each tet; domains never cross regions, and
         every tet of one region must have the same ``shear`` and ``bulk``
+    clusters : (n,) int, optional -- a cluster label per node: each domain is then a cluster of nodes
+        and the tets around them (:func:`~volspring.elements.tet_kinematics.pair_nodes` pairs nodes
+        along edges); default one domain per node
     stiffness_damping : float -- Rayleigh b [s], >= 0
 
     Examples
@@ -256,7 +259,7 @@ class NodalStrain(_TetContinuum):
     #: Weight of the per-tet volume term in the preconditioner's stand-in (see :meth:`preconditioner_blocks`).
     PRECONDITIONER_BULK = 1.0
 
-    def __init__(self, rest_positions, tets, shear, bulk, *, regions=None, stiffness_damping=0.0):
+    def __init__(self, rest_positions, tets, shear, bulk, *, regions=None, clusters=None, stiffness_damping=0.0):
         rest = np.asarray(rest_positions, dtype=np.float64)
         self.node_count = len(rest)
         self.kinematics = TetGradients.at_rest(rest, tets)
@@ -267,7 +270,16 @@ class NodalStrain(_TetContinuum):
             if regions.shape != (T,) or regions.dtype.kind not in "iu" or (T and regions.min() < 0):
                 raise ValueError(f"regions must be ({T},) integers >= 0, one per tet; got shape {regions.shape}, "
                                  f"dtype {regions.dtype}")
-        self.domains = SmoothingDomains(self.kinematics, self.node_count, regions)
+        if clusters is not None:
+            clusters = np.asarray(clusters)
+            if clusters.shape != (self.node_count,) or clusters.dtype.kind not in "iu" or \
+                    (self.node_count and clusters.min() < 0):
+                raise ValueError(f"clusters must be ({self.node_count},) integer labels >= 0, one per node; got shape "
+                                 f"{clusters.shape}, dtype {clusters.dtype}")
+            clusters = clusters.astype(np.int64)
+            clusters.setflags(write=False)
+        self.clusters = clusters
+        self.domains = SmoothingDomains(self.kinematics, self.node_count, regions, clusters)
         corner = self.domains.corner_domain
         self.shear = np.zeros(self.domains.domain_count)
         self.bulk = np.zeros(self.domains.domain_count)
@@ -336,11 +348,13 @@ class NodalStrain(_TetContinuum):
                                                                   self.kinematics.gradients)
 
     def _forces(self, state):
-        pressure = self.bulk * (state["J"] - 1.0)
-        mean_pressure = pressure[self.domains.corner_domain].mean(axis=1)
-        # dv_t/dx_a = V_t cof(F_t) g_ta: the pressure forces spread V_t pbar_t cof(F_t) like a stress.
-        weights = mean_pressure * self.kinematics.volumes
-        forces = -self.kinematics.spread(weights[:, None, None] * state["cof"], self.node_count)
+        forces = np.zeros((self.node_count, 3))
+        if self.bulk.any():
+            pressure = self.bulk * (state["J"] - 1.0)
+            mean_pressure = pressure[self.domains.corner_domain].mean(axis=1)
+            # dv_t/dx_a = V_t cof(F_t) g_ta: the pressure forces spread V_t pbar_t cof(F_t) like a stress.
+            weights = mean_pressure * self.kinematics.volumes
+            forces -= self.kinematics.spread(weights[:, None, None] * state["cof"], self.node_count)
         if "P" in state:
             forces -= self.domains.spread((self.shear * self.domains.volumes)[:, None, None] * state["P"])
         return forces
@@ -360,17 +374,18 @@ class NodalStrain(_TetContinuum):
     def _stiffness_times(self, state, u):
         """(n, 3) -- K u with the projected K at ``state``, without forming K."""
         domains = self.domains
-        W = state.get("volume_rows")
-        if W is None:  # kept in the state: CG applies the product many times at one state
-            import scipy.sparse as sp
+        result = np.zeros((self.node_count, 3))
+        if self.bulk.any():
+            if "volume_rows" not in state:  # kept in the state: CG applies the product many times at one state
+                import scipy.sparse as sp
 
-            indices, indptr = domains.volume_layout
-            W = sp.csr_matrix((self._ring_volume_gradients(state).ravel(), indices, indptr),
-                              shape=(domains.domain_count, 3 * self.node_count))
-            state["volume_rows"] = W, W.T.tocsr()
-        W, Wt = state["volume_rows"]
-        rate = W @ u.ravel()  # dv_d = sum_a (dv_d/dx_a) . u_a
-        result = (Wt @ (self.bulk / domains.volumes * rate)).reshape(-1, 3)
+                indices, indptr = domains.volume_layout
+                W = sp.csr_matrix((self._ring_volume_gradients(state).ravel(), indices, indptr),
+                                  shape=(domains.domain_count, 3 * self.node_count))
+                state["volume_rows"] = W, W.T.tocsr()
+            W, Wt = state["volume_rows"]
+            rate = W @ u.ravel()  # dv_d = sum_a (dv_d/dx_a) . u_a
+            result += (Wt @ (self.bulk / domains.volumes * rate)).reshape(-1, 3)
         if "P" in state:
             dP = 2.0 * _hessian_times(state["twists"], state["coefficients"], domains.averaged(u))
             result += domains.spread((self.shear * domains.volumes)[:, None, None] * dP)
@@ -455,11 +470,12 @@ class NodalStrain(_TetContinuum):
         """
         x = np.asarray(x, dtype=np.float64)
         tets, bulk = self._tet_shear
-        blocks = tets.stiffness_blocks(x)
-        state = {"cof": _cofactor(self.kinematics.deformation(x))}
-        w = self._volume_gradients(state)  # (T, 4, 3) dv_t / dx_a
-        w = w * np.sqrt(self.PRECONDITIONER_BULK * bulk / self.kinematics.volumes)[:, None, None]
-        blocks += (w[:, :, None, :, None] * w[:, None, :, None, :]).reshape(-1, 16, 3, 3)
+        blocks = tets.stiffness_blocks(x) if tets.shear.any() else np.zeros((len(bulk), 16, 3, 3))
+        if bulk.any():
+            state = {"cof": _cofactor(self.kinematics.deformation(x))}
+            w = self._volume_gradients(state)  # (T, 4, 3) dv_t / dx_a
+            w = w * np.sqrt(self.PRECONDITIONER_BULK * bulk / self.kinematics.volumes)[:, None, None]
+            blocks += (w[:, :, None, :, None] * w[:, None, :, None, :]).reshape(-1, 16, 3, 3)
         return blocks
 
     def linearize_operator(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0):

@@ -25,7 +25,7 @@ from functools import cached_property
 
 import numpy as np
 
-__all__ = ["SmoothingDomains", "TetGradients", "corotational", "domain_pairs", "rotation_preserving_svd"]
+__all__ = ["SmoothingDomains", "TetGradients", "corotational", "domain_pairs", "pair_nodes", "rotation_preserving_svd"]
 
 _TWIST_PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -231,10 +231,12 @@ class SmoothingDomains:
     gradients : TetGradients
     node_count : int
     regions : (T,) int, optional -- material region of every tet (domains never cross regions)
+    clusters : (n,) int, optional -- a cluster label per node: a domain is then a cluster of nodes (within
+        one region) and the tets around any of them, e.g. :func:`pair_nodes`; default one node per domain
 
     Attributes
     ----------
-    node : (d,) int -- the node of each domain
+    node : (d,) int -- the node of each domain (its cluster label with ``clusters``)
     region : (d,) int -- its region
     volumes : (d,) float -- V_d [m^3]
     ring_domain, ring_node : (r,) int -- the ring entries: domain and ring node, sorted by domain
@@ -243,12 +245,13 @@ class SmoothingDomains:
     corner_domain : (T, 4) int -- domain of corner c of tet t
     """
 
-    def __init__(self, gradients: TetGradients, node_count: int, regions=None):
+    def __init__(self, gradients: TetGradients, node_count: int, regions=None, clusters=None):
         tets = gradients.tets
         T = len(tets)
         regions = np.zeros(T, dtype=np.int64) if regions is None else np.asarray(regions, dtype=np.int64)
         region_count = int(regions.max()) + 1 if T else 1
-        keys = tets * region_count + regions[:, None]  # (T, 4): domain key of each corner
+        owners = tets if clusters is None else np.asarray(clusters, dtype=np.int64)[tets]
+        keys = owners * region_count + regions[:, None]  # (T, 4): domain key of each corner
         domain_keys, corner_domain = np.unique(keys, return_inverse=True)
         self.corner_domain = corner_domain.reshape(T, 4)
         self.node, self.region = np.divmod(domain_keys, region_count)
@@ -311,6 +314,53 @@ class SmoothingDomains:
         """(first, second) : (p,) int -- every ordered pair of ring entries of one domain, grouped by domain."""
         counts = np.bincount(self.ring_domain, minlength=self.domain_count)
         return domain_pairs(counts)
+
+
+def pair_nodes(points, tets) -> np.ndarray:
+    """(n,) int -- a cluster label per node: nodes matched in pairs along tet edges, the shortest edges first.
+
+    Rounds of mutual proposals (every unmatched node proposes along its shortest edge to an unmatched
+    node; mutual proposals pair up) until no two unmatched nodes share an edge; a node left over joins
+    the cluster of its nearest neighbour. Each round is a few vectorised passes over the edges, and the
+    result depends on the mesh only (ties go to the lower edge index). A cluster's label is its lowest node.
+
+    Why: one volume constraint per node locks partially on coarse meshes whose nodes are mostly on the
+    boundary (fewer than three free unknowns per constraint); a constraint per pair of nodes halves
+    their number and keeps the patch test (``benchmarks/study_locking.py``).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    tets = np.asarray(tets, dtype=np.int64)
+    n = len(points)
+    corners = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+    edges = np.unique(np.sort(tets[:, corners].reshape(-1, 2), axis=1), axis=0)
+    lengths = np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1)
+    order = np.lexsort((np.arange(len(edges)), lengths))  # shortest first, ties by edge index
+    edges = edges[order]
+    label = np.full(n, -1, dtype=np.int64)
+    while True:
+        open_edges = np.flatnonzero((label[edges[:, 0]] < 0) & (label[edges[:, 1]] < 0))
+        if not len(open_edges):
+            break
+        # Each node's proposal: its first open edge in length order (the lowest index: open_edges is sorted).
+        none = np.iinfo(np.int64).max
+        choice = np.full(n, none)
+        np.minimum.at(choice, edges[open_edges].T.ravel(), np.tile(open_edges, 2))
+        a, b = edges[open_edges, 0], edges[open_edges, 1]
+        mutual = open_edges[(choice[a] == open_edges) & (choice[b] == open_edges)]
+        pair = edges[mutual]
+        label[pair[:, 0]] = label[pair[:, 1]] = pair.min(axis=1)
+    left = np.flatnonzero(label < 0)
+    if len(left):
+        # A node whose neighbours are all paired joins its nearest neighbour's cluster (edges are sorted).
+        none = np.iinfo(np.int64).max
+        nearest = np.full(n, none)
+        np.minimum.at(nearest, edges.T.ravel(), np.tile(np.arange(len(edges)), 2))
+        for_left = nearest[left]
+        has = for_left < none
+        neighbour = np.where(edges[for_left[has], 0] == left[has], edges[for_left[has], 1], edges[for_left[has], 0])
+        label[left[has]] = label[neighbour]
+        label[left[~has]] = left[~has]  # a node on no tet: its own cluster
+    return label
 
 
 def domain_pairs(counts) -> tuple:
