@@ -143,3 +143,34 @@ def test_a_model_of_bodies_from_arrays_is_the_same_type():
     assert two.body_nodes(1).tolist() == [2, 3] and two.body_masses.tolist() == [2.0, 2.0]
     with pytest.raises(ValueError, match=r"body = 2 is not a body id in \[0, 1\]"):
         two.body_nodes(2)
+
+
+@pytest.mark.parametrize("rungs", [("smoothed", "springs+volume"), ("smoothed", "smoothed"), ("springs", "smoothed")])
+def test_bodies_on_any_rung_feel_the_forces_of_their_own_models(rungs):
+    """A placed, rotated body of a multi-body model pushes exactly as its own model does in its own frame:
+    F_model[body] = R F_body(local positions) for the rotation-invariant energies of every rung."""
+    from scipy.spatial.transform import Rotation
+
+    from volspring.elements import Springs
+
+    rubber = Material(E=1e6, nu=0.45, density=1000.0)
+    mesh = cube_mesh((2, 2, 2), (0.1, 0.1, 0.1))
+    turn = Rotation.from_rotvec([0.3, -0.5, 0.9]).as_matrix()
+    bodies = [Body(mesh, rubber, model=rungs[0], damping_ratio=0.05, name="a"),
+              Body(mesh, rubber, model=rungs[1], translation=(0.5, 0.0, 0.0), rotation=turn, name="b")]
+    model = Model.from_bodies(bodies)
+    assert model.rung == (rungs[0] if rungs[0] == rungs[1] else "mixed")
+    assert sum(not isinstance(e, Springs) for e in model.elements) == sum(
+        sum(not isinstance(e, Springs) for e in Model.from_mesh(mesh, rubber, model=rung).elements) for rung in rungs)
+    assert np.abs(model.forces(model.rest_positions)).max() < 1e-9  # placed at rest
+    rng = np.random.default_rng(5)
+    local = [mesh.points + 0.01 * rng.standard_normal(mesh.points.shape) for _ in bodies]
+    x = np.concatenate([local[0], local[1] @ turn.T + [0.5, 0.0, 0.0]])
+    forces = model.forces(x)
+    n = mesh.node_count
+    for index, (body, positions) in enumerate(zip(bodies, local)):
+        own = Model.from_mesh(mesh, rubber, model=body.model, damping_ratio=body.damping_ratio).forces(positions)
+        rotation = np.eye(3) if index == 0 else turn
+        # Round-off of the rotation and of sums over a few dozen tets: 1e-10 of the force scale.
+        np.testing.assert_allclose(forces[index * n:(index + 1) * n], own @ rotation.T, rtol=0,
+                                   atol=1e-10 * abs(own).max())

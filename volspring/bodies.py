@@ -65,6 +65,10 @@ class Body:
     body : TetMesh or SpringTopology
         The body in its own coordinates (a topology with shells).
     material : Material
+    model : {"springs", "springs+volume", "smoothed"}
+        The body's rung of the ladder (:mod:`volspring.ladder`); bodies of one scene may differ.
+    alpha : float, optional
+        The smoothed rung's weight (:meth:`Model.from_mesh <volspring.Model.from_mesh>`).
     rule : {"van_gelder", "lloyd", "uniform"}
         Stiffness rule (:meth:`Model.from_mesh <volspring.Model.from_mesh>`).
     stiffness : float, optional
@@ -88,6 +92,8 @@ class Body:
     body: TetMesh | SpringTopology
     material: Material
     _: KW_ONLY
+    model: str = "springs"
+    alpha: float | None = None
     rule: str = "van_gelder"
     stiffness: float | None = None
     damping_ratio: float | None = None
@@ -231,14 +237,16 @@ def assemble(model_class, bodies):
 
     Returns
     -------
-    Model -- node numbering in the module docstring; ``rule`` the bodies' common rule or "mixed"
+    Model -- node numbering in the module docstring; ``rule`` and ``rung`` the bodies' common rule and
+    rung, or "mixed"; one spring set for all springs, and each body's continuum sets placed (kept per body:
+    each has its own Rayleigh damping time)
     """
     bodies = _checked_bodies(bodies)
     parts = []
     for index, body in enumerate(bodies):  # a loop over bodies, not over nodes
         topology = body.topology
-        single = model_class.from_mesh(topology, body.material, rule=body.rule, stiffness=body.stiffness,
-                                       damping_ratio=body.damping_ratio, damping=body.damping)
+        single = model_class.from_mesh(topology, body.material, model=body.model, alpha=body.alpha, rule=body.rule,
+                                       stiffness=body.stiffness, damping_ratio=body.damping_ratio, damping=body.damping)
         rotation = _rotation_matrix(body.rotation, index=index)
         points = topology.points @ rotation.T + _vector(body.translation, "translation", index=index)
         for name in ("velocity", "angular_velocity"):  # refused now rather than when the run starts
@@ -274,10 +282,15 @@ def assemble(model_class, bodies):
                               max(topology.shell_thickness for topology, _, _ in parts))
     spring_set = Springs(node_count, topology.springs, np.concatenate([single.stiffness for _, single, _ in parts]),
                          np.concatenate([single.damping for _, single, _ in parts]), topology.rest_lengths, kinds)
-    rules = {body.rule for body in bodies}
-    return model_class(points, masses, (spring_set,), topology=topology, rule=rules.pop() if len(rules) == 1 else "mixed",
+    continuum = [element_set.placed(points, node_map) for node_map, (_, single, _) in zip(maps, parts)
+                 for element_set in single.elements if not isinstance(element_set, Springs)]
+    elements = ((spring_set,) if spring_set.spring_count or not continuum else ()) + tuple(continuum)
+    rules = {single.rule for _, single, _ in parts}
+    rungs = {single.rung for _, single, _ in parts}
+    return model_class(points, masses, elements, topology=topology, rule=rules.pop() if len(rules) == 1 else "mixed",
                        node_body=node_body, materials=tuple(body.material for body in bodies),
-                       body_names=tuple(body.name for body in bodies))
+                       body_names=tuple(body.name for body in bodies),
+                       rung=rungs.pop() if len(rungs) == 1 else "mixed")
 
 
 # ---------------------------------------------------------------------- initial conditions

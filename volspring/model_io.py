@@ -109,11 +109,7 @@ def _corotated_arrays(tets: CorotatedTets) -> dict:
 
 
 def _nodal_strain_arrays(nodal: NodalStrain) -> dict:
-    # Every corner of a tet lies in a domain of the tet's region with the tet's coefficients (the
-    # constructor checks it), so corner 0's domain gives back the per-tet inputs exactly.
-    corner = nodal.domains.corner_domain[:, 0]
-    arrays = _continuum_common(nodal) | {"shear": nodal.shear[corner], "bulk": nodal.bulk[corner],
-                                         "regions": np.asarray(nodal.domains.region[corner], dtype=np.int64)}
+    arrays = _continuum_common(nodal) | nodal.per_tet()
     if nodal.clusters is not None:
         arrays["clusters"] = np.asarray(nodal.clusters, dtype=np.int64)
     return arrays

@@ -202,6 +202,12 @@ class CorotatedTets(_TetContinuum):
             forces += self._damping_forces(*projected, v)
         return Linearization(forces, self._scale(stiffness_scale, damping_scale) * stiffness, stiffness, self)
 
+    def placed(self, rest_positions, node_map) -> "CorotatedTets":
+        """The same tets and coefficients in another node numbering (``node_map[i]``: the new index of node i)
+        and on other rest positions (the body moved rigidly into a scene)."""
+        return CorotatedTets(rest_positions, np.asarray(node_map)[self.kinematics.tets], self.shear,
+                             stiffness_damping=self.stiffness_damping)
+
     # ------------------------------------------------------------------ matrix-free
     def preconditioner_blocks(self, x) -> np.ndarray:
         """(T, 16, 3, 3) -- the projected stiffness blocks themselves (already on the 1-ring)."""
@@ -487,6 +493,28 @@ class NodalStrain(_TetContinuum):
             forces -= self.stiffness_damping * self._stiffness_times(state, np.asarray(v, dtype=np.float64))
         return self._operator(forces, lambda u: self._stiffness_times(state, np.asarray(u, dtype=np.float64)), x,
                               stiffness_scale, damping_scale)
+
+    def per_tet(self) -> dict:
+        """The constructor's per-tet inputs back: ``shear``, ``bulk`` and ``regions`` (T,) arrays.
+
+        Every corner of a tet lies in a domain of the tet's region with the tet's coefficients (the
+        constructor checks it), so corner 0's domain gives them exactly.
+        """
+        corner = self.domains.corner_domain[:, 0]
+        return {"shear": self.shear[corner], "bulk": self.bulk[corner],
+                "regions": np.asarray(self.domains.region[corner], dtype=np.int64)}
+
+    def placed(self, rest_positions, node_map) -> "NodalStrain":
+        """The same set in another node numbering (``node_map[i]``: the new index of node i) and on other
+        rest positions (the body moved rigidly into a scene); clusters follow their nodes."""
+        node_map = np.asarray(node_map, dtype=np.int64)
+        clusters = None
+        if self.clusters is not None:
+            clusters = np.arange(len(rest_positions), dtype=np.int64)
+            clusters[node_map[:len(self.clusters)]] = node_map[self.clusters]
+        inputs = self.per_tet()
+        return NodalStrain(rest_positions, node_map[self.kinematics.tets], inputs["shear"], inputs["bulk"],
+                           regions=inputs["regions"], clusters=clusters, stiffness_damping=self.stiffness_damping)
 
     def volume_ratios(self, x) -> np.ndarray:
         """(d,) float -- J_d = v_d / V_d of every smoothing domain at positions x."""
