@@ -16,8 +16,9 @@ quasi-Newton step that converges only linearly where springs are compressed (35 
 1e-8 on the same beam).
 
 Where K is singular (e.g. a string at rest has no transverse stiffness) or a step does not lower
-the energy, the step is retried with K + mu d I (d the mean diagonal of K), mu growing tenfold
-from 1e-8, and mu shrinks again after successful steps.
+the energy, the step is retried with the projected (clamped) stiffness, which is positive
+semi-definite, plus mu d I (d the mean diagonal of K), mu growing tenfold from 1e-8, and mu shrinks
+again after successful steps.
 
 Linear solves use :mod:`volspring.solvers` (AMG-CG by default, to ``linear_rtol``: an inexact
 Newton method); the AMG hierarchy is rebuilt for every Newton step since the stiffness changes
@@ -27,7 +28,7 @@ Convergence: ||F_free|| <= rtol ||load_free||, where the load is everything but 
 scene's forces at x), or down to the round-off floor of the spring forces, whichever is larger:
 each node's spring force sums terms k (l - l0) whose lengths carry an error of eps l0, so the
 residual cannot be resolved below eps ||sum_s k_s l0_s||, the sum over the springs at each free
-node (measured: Newton stalls at 0.25 of this floor on a stiff beam, E = 1e10 to 1e14 Pa, where
+node (a tet's forces likewise below eps 2 mu V |g| per corner: ``ElementSet.force_scale``) (measured: Newton stalls at 0.25 of this floor on a stiff beam, E = 1e10 to 1e14 Pa, where
 rtol = 1e-8 asked for the impossible and the solve was reported as failed). A scene without pins has no static equilibrium under a net load (the body
 would fall), and only one up to a rigid motion without: :func:`solve_static` refuses it.
 """
@@ -164,13 +165,21 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
         if history[-1] <= target:
             break
         extra = _force_stiffness(scene, pattern, x, t)
-        mean_diagonal = float(pattern.matrix(springs).diagonal().mean())
-        for attempt in range(12):
-            step, info = _newton_step(linear, pattern, springs, extra, residual, shift * mean_diagonal, x, held)
+        # |diagonal|: far from equilibrium the exact Hessian's diagonal can be negative, and a shift by a
+        # negative mean would make the system less definite, not more.
+        mean_diagonal = float(np.abs(pattern.matrix(springs).diagonal()).mean())
+        tangent = springs
+        for attempt in range(13):
+            step, info = _newton_step(linear, pattern, tangent, extra, residual, shift * mean_diagonal, x, held)
             accepted = step is not None and _line_search(scene, pattern, restrict, evaluate, x, step, residual, merit, t,
                                                          conservative)
             if accepted:
                 break
+            if tangent is springs and not clamp_compression:
+                # The exact Hessian's step failed (indefinite far from equilibrium, e.g. at inverted tets):
+                # retry with the projected stiffness, positive semi-definite, at the same shift first.
+                tangent = pattern.linearize(x, stiffness_scale=1.0, clamp_compression=True)
+                continue
             shift = max(1e-8, 10.0 * shift)
             logger.debug("static Newton iteration %d: step rejected, shift -> %.1e", iteration, shift)
         else:
@@ -199,9 +208,13 @@ def _force_stiffness(scene, pattern, x, t):
 
 
 def _roundoff_floor(model, pattern) -> float:
-    """eps ||sum over each free node's springs of k l0|| [N]: the force resolution of the spring sums."""
-    weight = model.stiffness * model.rest_lengths
-    per_node = np.bincount(model.springs.ravel(), weights=np.repeat(weight, 2), minlength=model.node_count)
+    """eps ||per free node, the summed force scales of the element sets|| [N]: the force resolution of their sums
+    (k l0 per spring, 2 mu V |g| per tet corner: :meth:`~volspring.elements.ElementSet.force_scale`)."""
+    per_node = np.zeros(model.node_count)
+    for element_set in model.elements:
+        scale = element_set.force_scale()
+        if scale is not None:
+            per_node += scale
     return float(np.finfo(float).eps * np.sqrt(3.0) * np.linalg.norm(per_node[pattern.free_nodes]))
 
 
