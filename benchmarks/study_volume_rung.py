@@ -49,33 +49,15 @@ NUS = (0.25, 0.3, 0.4, 0.45, 0.49, 0.499)
 
 
 # ---------------------------------------------------------------------------- meshes
-def jittered_delaunay_cube(points_per_side=5, seed=11, jitter=0.08):
-    from scipy.spatial import Delaunay
-
-    from meshing import TetMesh
-
-    rng = np.random.default_rng(seed)
-    grid = np.stack(np.meshgrid(*[np.linspace(0, 1, points_per_side)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
-    interior = ((grid > 0) & (grid < 1)).all(axis=1)
-    grid[interior] += rng.uniform(-jitter, jitter, (interior.sum(), 3)) * 4 / (points_per_side - 1)
-    tets = Delaunay(grid).simplices
-    corners = grid[tets]
-    volumes = np.linalg.det(corners[:, 1:] - corners[:, :1]) / 6
-    keep = np.abs(volumes) > 1e-6 / (points_per_side - 1) ** 3
-    tets, volumes = tets[keep].copy(), volumes[keep]
-    tets[volumes < 0, 2:] = tets[volumes < 0, 3:1:-1]
-    return TetMesh.compact(grid, tets)
-
-
 def box_meshes():
-    from meshing import structured_box
+    from meshing import jittered_cube, structured_box
     from validation.cases import beam_cells
 
     return {"structured 4^3": structured_box((4, 4, 4), (1.0, 1.0, 1.0)),
-            "Delaunay 5^3": jittered_delaunay_cube(5),
+            "Delaunay 5^3": jittered_cube(5),
             "beam 20x2x2": structured_box(beam_cells(1.0, 0.1, 2), (1.0, 0.1, 0.1)),
             "beam 10x1x1": structured_box(beam_cells(1.0, 0.1, 1), (1.0, 0.1, 0.1)),
-            "Delaunay 8^3": jittered_delaunay_cube(8, seed=1)}
+            "Delaunay 8^3": jittered_cube(8, seed=1)}
 
 
 # ---------------------------------------------------------------------------- operators and probes
@@ -206,7 +188,9 @@ _CUBE = {}
 
 def on_a_cube(mesh, A, B, mu, bulk, memo):
     if "cube" not in _CUBE:
-        cube = jittered_delaunay_cube(8, seed=1)
+        from meshing import jittered_cube
+
+        cube = jittered_cube(8, seed=1)
         _CUBE["cube"] = (cube, *operators(cube, _CUBE["rule"]), {})
     cube, Ac, Bc, memo_cube = _CUBE["cube"]
     return combined("free", "axes")(cube, Ac, Bc, mu, bulk, memo_cube)
@@ -325,15 +309,15 @@ def study_heldout(rule, nus, cache):
 def study_cost():
     """Seconds on one core: the spring model's build on a fresh mesh (cold: the mesh's edges and faces are
     computed then) and again (warm), network_moduli, and the springs+volume model's build on a fresh mesh."""
-    from meshing import structured_box
+    from meshing import jittered_cube, structured_box
     from volspring import Material, Model
     from volspring.ladder import network_moduli
 
     rubber = Material(E=1e6, nu=0.49, density=1000.0)
     print("\nCalibration cost (one core): seconds")
     for name, make in (("structured 30x10x10", lambda: structured_box((30, 10, 10), (3.0, 1.0, 1.0))),
-                       ("Delaunay 14^3", lambda: jittered_delaunay_cube(14, seed=2)),
-                       ("Delaunay 27^3", lambda: jittered_delaunay_cube(27, seed=2)),
+                       ("Delaunay 14^3", lambda: jittered_cube(14, seed=2)),
+                       ("Delaunay 27^3", lambda: jittered_cube(27, seed=2)),
                        ("structured 60x18x18", lambda: structured_box((60, 18, 18), (3.0, 1.0, 1.0)))):
         mesh = make()
         start = time.perf_counter()

@@ -16,7 +16,7 @@ from meshing.mesh import TetMesh
 from meshing.quality import QualitySummary, min_dihedral_angles, quality_summary, radius_ratios
 from meshing.shapes import Shape, box, cylinder, ellipsoid, parse_shape, sphere, torus
 from meshing.shells import add_shells
-from meshing.structured import structured_box
+from meshing.structured import jittered_cube, structured_box
 from meshing.surface import SurfaceError, load_surface
 from meshing.tetrahedralize import tetrahedralize
 from meshing.topology import SpringTopology
@@ -41,6 +41,7 @@ __all__ = [
     "radius_ratios",
     "read_topology",
     "sphere",
+    "jittered_cube",
     "structured_box",
     "tetrahedralize",
     "torus",

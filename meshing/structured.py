@@ -29,7 +29,7 @@ import numpy as np
 from meshing.geometry import signed_tet_volumes
 from meshing.mesh import TetMesh
 
-__all__ = ["KUHN_PATHS", "structured_box"]
+__all__ = ["KUHN_PATHS", "jittered_cube", "structured_box"]
 
 #: Kuhn's six tets of a cell, as corner numbers a*4 + b*2 + c of the corner (a, b, c) in {0, 1}^3.
 KUHN_PATHS = ((0, 4, 6, 7), (0, 4, 5, 7), (0, 2, 6, 7), (0, 2, 3, 7), (0, 1, 5, 7), (0, 1, 3, 7))
@@ -79,3 +79,29 @@ def structured_box(cells, size, *, origin=(0.0, 0.0, 0.0), pattern: str = "mirro
     negative = signed_tet_volumes(points, tets) < 0
     tets[negative, 2:] = tets[negative, 3:1:-1]
     return TetMesh(points, tets)
+
+
+def jittered_cube(points_per_side: int = 5, *, jitter: float = 0.08, seed: int = 11) -> TetMesh:
+    """The unit cube as Delaunay tets of a grid whose interior points are moved at random: no two tets alike.
+
+    An unstructured mesh with a known shape, for patch tests and calibration studies. Interior points move
+    by up to ``jitter`` times four cell sizes over the grid spacing (``jitter`` of the cube at five points a
+    side), drawn from ``numpy.random.default_rng(seed)``; the flat tets Delaunay leaves between coplanar
+    boundary points are dropped and the rest oriented positively.
+
+    >>> mesh = jittered_cube()
+    >>> mesh.node_count, round(mesh.volume, 12)
+    (125, 1.0)
+    """
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(seed)
+    grid = np.stack(np.meshgrid(*[np.linspace(0, 1, points_per_side)] * 3, indexing="ij"), axis=-1).reshape(-1, 3)
+    interior = ((grid > 0) & (grid < 1)).all(axis=1)
+    grid[interior] += rng.uniform(-jitter, jitter, (interior.sum(), 3)) * 4 / (points_per_side - 1)
+    tets = Delaunay(grid).simplices
+    volumes = signed_tet_volumes(grid, tets)
+    keep = np.abs(volumes) > 1e-6 / (points_per_side - 1) ** 3
+    tets, volumes = tets[keep].copy(), volumes[keep]
+    tets[volumes < 0, 2:] = tets[volumes < 0, 3:1:-1]
+    return TetMesh.compact(grid, tets)

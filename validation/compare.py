@@ -125,6 +125,20 @@ def _field_name(group: str, name: str) -> str:
     return f"springs_{name}" if group == "springs" else f"model_{name}"
 
 
+def _answers(case: Case, rules, models, note, answer) -> dict:
+    """``{"springs": {rule: ...}, "models": {rung: ...}}``: ``answer(field_name, model)`` of every model of
+    :func:`_models`, the springs rung's answer reused from the same rule's, a refusal as ``{"refused": message}``."""
+    answers = {"springs": {}, "models": {}}
+    for group, name, model in _models(case, rules, models, note):
+        if model is None:
+            answers[group][name] = dict(answers["springs"][LADDER_RULE])
+        elif isinstance(model, str):
+            answers[group][name] = {"refused": model}
+        else:
+            answers[group][name] = answer(_field_name(group, name), model)
+    return answers
+
+
 def compare_static(case: Case, *, rules=RULES, models=(), elements=("P2", "P1"), folder=None,
                    progress=None) -> Comparison:
     """Springs (each rule) and the ladder's rungs against the FEM reference (P2) and P1 on the case's mesh.
@@ -177,20 +191,14 @@ def compare_static(case: Case, *, rules=RULES, models=(), elements=("P2", "P1"),
     for element in elements[1:]:
         fem[element].update(tip_deflection_error=_relative(fem[element]["tip_deflection_m"], reference_tip),
                             **displacement_errors(displacements[f"fem_{element}"], reference))
-    answers = {"springs": {}, "models": {}}
-    for group, name, model in _models(case, rules, models, note):
-        if model is None:
-            answers[group][name] = dict(answers["springs"][LADDER_RULE])
-            continue
-        if isinstance(model, str):
-            answers[group][name] = {"refused": model}
-            continue
+
+    def answer(field_name, model):
         solved = spring_static(case, model)
         u = solved.displacement
-        displacements[_field_name(group, name)] = u
+        displacements[field_name] = u
         tip = tip_deflection(case, u, **measure)
         volume = deformed_volume_change(case.mesh, u)
-        answers[group][name] = {
+        return {
             "tip_deflection_m": tip, "tip_deflection_error": _relative(tip, reference_tip),
             **displacement_errors(u, reference),
             "volume_change_m3": volume, "volume_change_error_vs_fem": _relative(volume, reference_volume),
@@ -199,6 +207,8 @@ def compare_static(case: Case, *, rules=RULES, models=(), elements=("P2", "P1"),
             **({"mean_stiffness_n_per_m": float(model.stiffness.mean())} if model.spring_count else {}),
             "solver": solved.method, "iterations": solved.iterations, "residual": solved.residual,
             "seconds": solved.seconds}
+
+    answers = _answers(case, rules, models, note, answer)
     size = float(np.linalg.norm(np.ptp(case.mesh.points, axis=0)))
     largest = fem[elements[0]]["max_displacement_m"]
     results = {"case": case.name, "title": case.title, "kind": case.kind, "parameters": _jsonable(case.parameters),
@@ -240,22 +250,17 @@ def compare_modes(case: Case, *, rules=RULES, models=(), count: int = 4, folder=
     for clamp in case.clamps:
         held |= np.asarray(clamp.region(case.mesh.points), bool)
     fields = {"fem_P2": modes.shapes[0] / np.abs(modes.shapes[0]).max()}
-    answers = {"springs": {}, "models": {}}
-    for group, name, model in _models(case, rules, models, note):
-        if model is None:
-            answers[group][name] = dict(answers["springs"][LADDER_RULE])
-            continue
-        if isinstance(model, str):
-            answers[group][name] = {"refused": model}
-            continue
+
+    def answer(field_name, model):
         start = time.perf_counter()
         frequencies, shapes = spring_frequencies(model, held, count=count)
-        fields[_field_name(group, name)] = shapes[0] / np.abs(shapes[0]).max()
-        answers[group][name] = {"frequencies_hz": frequencies.tolist(),
-                                "first_frequency_hz": float(frequencies[0]),
-                                "first_frequency_error": _relative(float(frequencies[0]), float(modes.frequencies[0])),
-                                "frequency_errors": [(f - r) / r for f, r in zip(frequencies, modes.frequencies)],
-                                "seconds": time.perf_counter() - start}
+        fields[field_name] = shapes[0] / np.abs(shapes[0]).max()
+        return {"frequencies_hz": frequencies.tolist(), "first_frequency_hz": float(frequencies[0]),
+                "first_frequency_error": _relative(float(frequencies[0]), float(modes.frequencies[0])),
+                "frequency_errors": [(f - r) / r for f, r in zip(frequencies, modes.frequencies)],
+                "seconds": time.perf_counter() - start}
+
+    answers = _answers(case, rules, models, note, answer)
     results = {"case": case.name, "title": case.title, "kind": case.kind, "parameters": _jsonable(case.parameters),
                "mesh": _mesh_summary(case), "analytic": dict(case.analytic),
                "fem": {"P2": {"frequencies_hz": modes.frequencies.tolist(),
