@@ -238,8 +238,10 @@ def test_smoothed_frequencies_match_p2_without_spurious_modes():
     ratio = frequencies / reference.frequencies
     print("smoothed / P2 frequencies:", np.round(ratio, 4))
     # No spurious low modes: every frequency within the band the discretisation error allows;
-    # measured 0.99-1.06 on this 20 x 2 x 2 beam (bending slightly stiff, like the static deflection).
+    # measured 0.95-1.01 on this 20 x 2 x 2 beam with the volume on node pairs (0.99-1.06 on single nodes).
     assert ratio.min() > 0.9 and ratio.max() < 1.15
+    # The goal for the first three: within 3% (measured 0.998, 1.008, 0.989).
+    assert np.abs(ratio[:3] - 1).max() < 0.03
 
 
 def test_symplectic_euler_conserves_energy_below_the_critical_step(cube):

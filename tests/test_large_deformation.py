@@ -214,14 +214,15 @@ def test_springs_plus_volume_at_large_uniaxial_strain_reported(cubes, capsys):
     nu     +25%                  +50%                  -25%                  -50%
     ====== ===================== ===================== ===================== =====================
     0.30   s -0.36%, F +10.6%    s -0.98%, F +19.6%    s -0.78%, F -18.2%    s -2.45%, F -26.6%
-    0.45   s -0.12%, F +8.7%     s -0.55%, F +17.5%    s -0.37%, F -1.8%     s -1.72%, F -5.8%
-    0.49   s +0.03%, F +8.5%     s -0.10%, F +17.4%    s -0.15%, F +1.4%     s +0.62%, F +4.1%
+    0.45   s -0.12%, F +8.7%     s -0.55%, F +17.5%    s -0.37%, F -1.8%     s -2.37%, F -9.7%
+    0.49   s +0.03%, F +8.5%     s -0.10%, F +17.4%    s -0.15%, F +1.4%     s -0.77%, F +9.0%
     ====== ===================== ===================== ===================== =====================
 
     Asserted loosely: in tension at nu >= 0.45 the volume term holds J near the material's and so the
     mean lateral stretch within 1% (measured <= 0.55%), and the axial force is 0-30% too stiff (measured
     8.5-17.5%: the springs stiffen in stretch where the material softens; with the network calibrated on
-    all five deviatoric strains, before the axes-only probes, it was 54-68%).
+    all five deviatoric strains, before the axes-only probes, it was 54-68%). At -50% the face is far from
+    flat (spread 16-22% of the edge) and the equilibrium found depends on the solver's path.
     """
     mesh = cubes["structured"]
     lines = []
