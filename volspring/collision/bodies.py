@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from meshing.mesh import TetMesh
+from meshing.mesh import TET_EDGES, TET_FACES, TetMesh
 
 __all__ = ["CollisionBodies"]
 
@@ -163,6 +163,23 @@ class CollisionBodies:
         """(F,) int64 -- body id of each boundary triangle."""
         counts = [len(m.boundary_faces) for m in self.meshes]
         return _frozen(np.repeat(np.arange(self.body_count), counts))
+
+    @cached_property
+    def tet_face_on_boundary(self) -> np.ndarray:
+        """(M, 4) bool -- whether face k of each tet (``meshing.mesh.TET_FACES[k]``, outward wound for a
+        positively oriented tet) is a boundary face."""
+        faces = np.sort(self.tets[:, TET_FACES].reshape(-1, 3), axis=1)
+        _, inverse, counts = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
+        return _frozen((counts[inverse.ravel()] == 1).reshape(-1, 4))
+
+    @cached_property
+    def tet_edge_on_boundary(self) -> np.ndarray:
+        """(M, 6) bool -- whether edge e of each tet (``meshing.mesh.TET_EDGES[e]``) is an edge of a boundary face."""
+        n = np.int64(self.node_count)
+        faces = self.tets[:, TET_FACES][self.tet_face_on_boundary]  # (F, 3)
+        pairs = np.sort(faces[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2), axis=1)
+        edges = np.sort(self.tets[:, TET_EDGES], axis=2)
+        return _frozen(np.isin(edges[..., 0] * n + edges[..., 1], pairs[:, 0] * n + pairs[:, 1]))
 
     @cached_property
     def neighbours(self) -> tuple[np.ndarray, np.ndarray]:

@@ -45,6 +45,7 @@ from volspring.collision.penalty import (
 )
 from volspring.collision.penetration import closest_surface_depths, consistent_penetration_depths
 from volspring.collision.spatial_hash import detect_collisions
+from volspring.collision.tet_tet import EdgeCrossingContacts, crossing_tet_pairs, edge_crossing_contacts
 from volspring.model import Model
 from meshing.topology import SPRING_KINDS
 
@@ -121,6 +122,12 @@ class ContactForce(_PenaltyResponse):
     method : {"consistent", "closest_surface"} -- penetration depths (Heidelberger et al. 2004, or
         the naive nearest surface point, kept for comparison)
     cell_size : float, optional -- hash cell [m]; default the mean rest edge length
+    edges : bool -- also push apart bodies that cross with no vertex inside the other (two thin
+        slabs crossing like an X): intersecting tet pairs from
+        :func:`~volspring.collision.tet_tet.crossing_tet_pairs`, then a contact per boundary edge
+        through a boundary face (:func:`~volspring.collision.tet_tet.edge_crossing_contacts`), with
+        the same force law and Jacobian. Off by default: it costs a tet-tet broad and narrow phase
+        per detection (``benchmarks/bench_collision.py`` prints the ratio)
 
     Examples
     --------
@@ -141,7 +148,7 @@ class ContactForce(_PenaltyResponse):
 
     def __init__(self, model, *, stiffness=None, stiffness_factor=DEFAULT_STIFFNESS_FACTOR, damping_ratio=None,
                  damping=None, friction=0.0, friction_velocity=DEFAULT_FRICTION_VELOCITY, self_collision=False,
-                 method="consistent", cell_size=None):
+                 method="consistent", cell_size=None, edges=False):
         model = _as_model(model)
         super().__init__(model, stiffness=stiffness, stiffness_factor=stiffness_factor, damping_ratio=damping_ratio,
                          damping=damping, friction=friction, friction_velocity=friction_velocity)
@@ -156,6 +163,7 @@ class ContactForce(_PenaltyResponse):
         self.self_collision = bool(self_collision)
         self.method = method
         self.cell_size = None if cell_size is None else _positive(cell_size, "cell_size")
+        self.edges = bool(edges)
 
     @property
     def pair_stiffness(self) -> np.ndarray:
@@ -166,30 +174,53 @@ class ContactForce(_PenaltyResponse):
 
     def __repr__(self) -> str:
         return (f"ContactForce({self.bodies.body_count} bodies, method={self.method!r}, friction={self.friction:g}, "
-                f"self_collision={self.self_collision})")
+                f"self_collision={self.self_collision}, edges={self.edges})")
 
     def penetration_depths(self, x):
         """The :class:`~volspring.collision.PenetrationDepths` at model positions ``x`` (collision ids)."""
+        return self._vertex_contacts(x)[1]
+
+    def _vertex_contacts(self, x):
         positions = np.asarray(x, dtype=np.float64)[self.collision_nodes]
         hits = detect_collisions(self.bodies, positions, cell_size=self.cell_size, self_collision=self.self_collision)
         depth_method = DEPTH_METHODS[self.method]
         options = {} if self.method == "closest_surface" else {"cell_size": self.cell_size}
-        return depth_method(self.bodies, positions, hits, **options)
+        return hits, depth_method(self.bodies, positions, hits, **options)
+
+    def edge_crossings(self, x, hits=None) -> EdgeCrossingContacts:
+        """The :class:`~volspring.collision.tet_tet.EdgeCrossingContacts` at model positions ``x`` (collision ids)."""
+        positions = np.asarray(x, dtype=np.float64)[self.collision_nodes]
+        pairs = crossing_tet_pairs(self.bodies, positions, cell_size=self.cell_size, self_collision=self.self_collision)
+        return edge_crossing_contacts(self.bodies, positions, pairs, colliding=hits)
 
     def _detect(self, x) -> PenaltyContacts:
-        depths = self.penetration_depths(x)
-        weights = np.concatenate([np.ones((depths.count, 1)), -depths.barycentric], axis=1)
-        nodes = self.collision_nodes[np.concatenate([depths.vertex[:, None], self.bodies.tets[depths.tet]], axis=1)]
+        hits, depths = self._vertex_contacts(x)
+        # Stencils of five nodes: the vertex (or the edge's end behind a face), then the nodes of the reaction.
+        vertex, reaction = depths.vertex, self.bodies.tets[depths.tet]
+        weights, depth, direction = depths.barycentric, depths.depth, depths.direction
+        vertex_body, other_body = depths.vertex_body, depths.other_body
+        if self.edges:
+            edge = self.edge_crossings(x, hits)
+            # The face's three nodes, the last repeated with weight 0 to fill the five-node stencil.
+            vertex = np.concatenate([vertex, edge.vertex])
+            reaction = np.concatenate([reaction, edge.face[:, [0, 1, 2, 2]]])
+            weights = np.concatenate([weights, np.pad(edge.barycentric, ((0, 0), (0, 1)))])
+            depth, direction = np.concatenate([depth, edge.depth]), np.concatenate([direction, edge.direction])
+            vertex_body = np.concatenate([vertex_body, edge.vertex_body])
+            other_body = np.concatenate([other_body, edge.face_body])
+            if edge.count:
+                logger.debug("%d edge-face crossings, deepest %.3g m", edge.count, edge.depth.max())
+        nodes = self.collision_nodes[np.concatenate([vertex[:, None], reaction], axis=1)]
         masses = self.model.masses
         vertex_mass = masses[nodes[:, 0]]
-        tet_mass = np.einsum("ck,ck->c", depths.barycentric, masses[nodes[:, 1:]])
+        tet_mass = np.einsum("ck,ck->c", weights, masses[nodes[:, 1:]])
         stiffness, damping = self._coefficients(
-            self._pair_modulus[depths.vertex_body, depths.other_body], self._body_length[depths.vertex_body],
+            self._pair_modulus[vertex_body, other_body], self._body_length[vertex_body],
             vertex_mass * tet_mass / (vertex_mass + tet_mass))
         if depths.count:
             logger.debug("%d contacts, deepest %.3g m", depths.count, depths.depth.max())
-        return PenaltyContacts(nodes, weights, np.maximum(depths.depth, 0.0), depths.direction, stiffness, damping,
-                               depths.other_body)
+        weights = np.concatenate([np.ones((len(vertex), 1)), -weights], axis=1)
+        return PenaltyContacts(nodes, weights, np.maximum(depth, 0.0), direction, stiffness, damping, other_body)
 
 
 class ObstacleContactForce(_PenaltyResponse):
