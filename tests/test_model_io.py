@@ -33,7 +33,14 @@ def arrays_model():
                              stiffness=[100.0, 50.0], damping=0.5, rest_lengths=[0.9, 1.1])
 
 
-MODELS = {"shells": shelled_model, "two bodies": two_body_model, "arrays": arrays_model}
+def curly_hair_model():
+    from volspring.structures import hair, strand_points
+
+    return hair(strand_points([0, 0, 0], (0, 0, -1), 0.05, 12, curl_radius=0.004, curl_pitch=0.01),
+                bending_stiffness=1e-6, axial_stiffness=10.0, linear_density=1e-3)
+
+
+MODELS = {"shells": shelled_model, "two bodies": two_body_model, "arrays": arrays_model, "hair": curly_hair_model}
 
 
 def _arrays(model):
@@ -97,7 +104,7 @@ class _Anchors(ElementSet):
 def test_an_element_set_of_unknown_type_is_refused_not_dropped(tmp_path):
     model = shelled_model().with_elements(_Anchors([0, 1]))
     with pytest.raises(TypeError, match=r"cannot save model.elements\[1\], a _Anchors: a model file holds element "
-                                        r"sets of the types Springs, CorotatedTets, NodalStrain only"):
+                                        r"sets of the types Springs, CorotatedTets, NodalStrain, AngleSprings, DihedralSprings only"):
         save_model(tmp_path / "model.vsmodel.npz", model)
     assert list(tmp_path.iterdir()) == []
 
@@ -117,7 +124,7 @@ def test_a_newer_version_is_refused_naming_file_and_versions(tmp_path):
     (shelled_model, {"topology/tets": None}, r"model.vsmodel.npz is damaged .*'topology/tets' is missing"),
     (shelled_model, {"element_types": np.asarray(["volume"])},
      r"model.vsmodel.npz holds an element set of type 'volume' \(elements\[0\]\), which this volspring cannot "
-     r"read \(known: springs, corotated_tets, nodal_strain\)"),
+     r"read \(known: springs, corotated_tets, nodal_strain, angle_springs, dihedral_springs\)"),
     (arrays_model, {"masses": -np.ones(3)}, r"model.vsmodel.npz holds an invalid model: masses\[0\] = -1.0"),
     (arrays_model, {"format": np.asarray("volspring.spring_topology")},
      r"model.vsmodel.npz holds format 'volspring.spring_topology', not 'volspring.model'"),

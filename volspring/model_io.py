@@ -17,15 +17,18 @@ The file is a compressed ``.npz`` (numpy, read without pickle), by convention na
     ladder have none and load as ``"springs"``, which they are;
 ``element_types`` (e,) text
     the type of every element set, in the model's order, as named in :data:`ELEMENT_SET_TYPES`
-    (``"springs"``, ``"corotated_tets"``, ``"nodal_strain"``); set ``i``'s arrays are
+    (``"springs"``, ``"corotated_tets"``, ``"nodal_strain"``, ``"angle_springs"``,
+    ``"dihedral_springs"``); set ``i``'s arrays are
     ``elements/i/NAME``. For springs: ``pairs`` (s, 2) int64, ``stiffness`` (s,) float64 [N/m],
     ``damping`` (s,) float64 [N s/m], ``rest_lengths`` (s,) float64 [m], ``kinds`` (s,) int8 with
     ``kind_names`` (k,) text (the labels of ``SPRING_KINDS``). For the continuum sets
     (:mod:`volspring.elements.continuum`), what their constructor takes, the rest positions being
     the model's first ``node_count``: ``node_count`` () int64, ``tets`` (T, 4) int64,
     ``stiffness_damping`` () float64 [s], and per tet ``shear`` (T,) float64 [Pa]; a nodal strain
-    set also ``bulk`` (T,) float64 [Pa] and ``regions`` (T,) int64 (its per-domain coefficients and
-    smoothing domains are rebuilt from these);
+    set also ``bulk`` (T,) float64 [Pa] and ``regions`` (T,) int64, and ``clusters`` (n,) int64 when
+    its domains are clusters of nodes (its per-domain coefficients and smoothing domains are rebuilt
+    from these). For angle and dihedral springs (:mod:`volspring.elements.angles`): ``chains`` (e, 3) or
+    (e, 4) int64, ``stiffness`` (e,) float64 [N m/rad^2], ``rest_angles`` (e,) float64 [rad];
 ``has_topology`` () bool, and ``topology/NAME``
     the spring topology the model was built from, if any, in the layout of a topology file
     (:mod:`meshing.topology_io`: points, mesh_node_count, tets, springs, kinds, shell data).
@@ -69,7 +72,7 @@ import numpy as np
 from meshing._archive import labelled_codes, read_archive, take_array, write_archive
 from meshing.topology import SPRING_KINDS
 from meshing.topology_io import topology_arrays, topology_from_arrays
-from volspring.elements import CorotatedTets, NodalStrain, Springs
+from volspring.elements import AngleSprings, CorotatedTets, DihedralSprings, NodalStrain, Springs
 from volspring.elements.tet_kinematics import TetGradients
 from volspring.material import Material
 from volspring.model import Model
@@ -157,10 +160,29 @@ def _springs_from_file(arrays, path, prefix, rest_positions) -> Springs:
     return _springs_from_arrays(arrays, path, prefix, len(rest_positions))
 
 
+def _joint_arrays(joints) -> dict:
+    """AngleSprings (``triples``) and DihedralSprings (``quads``): their chains, stiffness and rest angles."""
+    chains = joints.triples if isinstance(joints, AngleSprings) else joints.quads
+    return {"chains": np.asarray(chains, dtype=np.int64), "stiffness": joints.stiffness,
+            "rest_angles": joints.rest_angles}
+
+
+def _joints_from_file(kind, width):
+    def read(arrays, path, prefix, rest_positions):
+        chains = take_array(arrays, prefix + "chains", path, shape=("e", width), kind="i")
+        stiffness = take_array(arrays, prefix + "stiffness", path, shape=(len(chains),), kind="f")
+        rest = take_array(arrays, prefix + "rest_angles", path, shape=(len(chains),), kind="f")
+        return kind(len(rest_positions), chains, stiffness, rest)
+
+    return read
+
+
 #: The element-set types a model file can hold: name in the file -> (type, its arrays, the set from arrays).
 ELEMENT_SET_TYPES = {"springs": (Springs, _springs_arrays, _springs_from_file),
                      "corotated_tets": (CorotatedTets, _corotated_arrays, _corotated_from_arrays),
-                     "nodal_strain": (NodalStrain, _nodal_strain_arrays, _nodal_strain_from_arrays)}
+                     "nodal_strain": (NodalStrain, _nodal_strain_arrays, _nodal_strain_from_arrays),
+                     "angle_springs": (AngleSprings, _joint_arrays, _joints_from_file(AngleSprings, 3)),
+                     "dihedral_springs": (DihedralSprings, _joint_arrays, _joints_from_file(DihedralSprings, 4))}
 
 
 def save_model(path, model: Model) -> Path:
@@ -207,7 +229,7 @@ def save_model(path, model: Model) -> Path:
             known = ", ".join(kind.__name__ for kind, _, _ in ELEMENT_SET_TYPES.values())
             raise TypeError(f"cannot save model.elements[{index}], a {type(element_set).__name__}: a model file "
                             f"holds element sets of the types {known} only, and would silently lose this one")
-        if name != "springs":
+        if isinstance(element_set, (CorotatedTets, NodalStrain)):  # rebuilt from the model's rest positions
             _check_rebuilt_from(model, index, element_set)
         types.append(name)
         to_arrays = ELEMENT_SET_TYPES[name][1]
