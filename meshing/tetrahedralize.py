@@ -15,7 +15,8 @@ from meshing.mesh import TetMesh
 from meshing.tetrahedralize_delaunay import _delaunay_tets
 from meshing.tetrahedralize_gmsh import _gmsh_tets
 
-__all__ = ["MAX_TETS", "METHODS", "TETS_PER_CUBIC_SIZE", "estimated_tet_count", "tetrahedralize"]
+__all__ = ["MAX_TETS", "METHODS", "TETS_PER_CUBIC_SIZE", "estimated_tet_count", "excess_volume_fraction",
+           "tetrahedralize"]
 
 logger = logging.getLogger(__name__)
 
@@ -33,8 +34,34 @@ def estimated_tet_count(volume: float, size: float) -> float:
     return TETS_PER_CUBIC_SIZE * volume / size**3
 
 
+def excess_volume_fraction(mesh: TetMesh, body) -> float:
+    """How much more volume the tets hold than the body, relative to the body's: ``(V_mesh - V_body) / V_body``.
+
+    With the Delaunay backend's enclosing band this is the band's extra volume net of the chords' deficit;
+    without it, or with gmsh, it is usually negative (inscribed facets cut the curved parts).
+
+    Parameters
+    ----------
+    mesh : TetMesh -- the tets
+    body : meshing.shapes.Shape, trimesh.Trimesh or float -- the body: a built-in shape (its exact volume), a
+        closed surface (its enclosed volume) or the volume itself [m^3]
+
+    Examples
+    --------
+    >>> from meshing.shapes import sphere
+    >>> shape = sphere(0.5)
+    >>> 0 < excess_volume_fraction(tetrahedralize(shape, size=0.1, method="delaunay", seed=0), shape) < 0.05
+    True
+    """
+    volume = float(body) if isinstance(body, (int, float)) else float(body.volume)
+    if not (math.isfinite(volume) and volume > 0):
+        raise ValueError(f"the body's volume = {volume} is not a positive finite volume")
+    return (mesh.volume - volume) / volume
+
+
 def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | None = None,
-                   feature_angle: float = 40.0, verbose: bool = False) -> TetMesh:
+                   feature_angle: float = 40.0, enclosing_band: bool | None = None,
+                   verbose: bool = False) -> TetMesh:
     """Fill a closed surface with tetrahedra of edge length about ``size``.
 
     Parameters
@@ -51,10 +78,21 @@ def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | No
         surface vertices and a band of points just outside, scipy's Delaunay triangulates everything;
         tets whose centroid lies inside the surface are kept, so every surface vertex is a mesh node.
         Flat and sliver tets on the boundary are peeled off (logged), and boundary edges or vertices
-        that are not manifold are fixed by adding the band tets around them (logged).
+        that are not manifold are fixed by adding the band tets around them (logged). With
+        ``enclosing_band`` (the default for built-in shapes) the surface vertices first move outward by about the chord
+        sag of their facets, so that the tets' boundary lies in a thin sheet above the smooth surface
+        and a finer render surface of the same shape lies inside the tets (:func:`excess_volume_fraction`
+        reports the sheet's volume; it is logged too).
     seed : int, optional -- random seed (the lattice jitter; gmsh's ``Mesh.RandomSeed``)
-    feature_angle : float -- gmsh only, triangle surfaces: dihedral angle [degrees] above which an edge is
-        kept as a sharp feature
+    feature_angle : float -- dihedral angle [degrees] above which an edge is a sharp feature: gmsh, triangle
+        surfaces: kept as such; delaunay: a crease the enclosing band does not round (faces meeting at a
+        smaller angle sample a curved surface). A smooth scan with coarse facets wants 180.
+    enclosing_band : bool, optional -- delaunay only: move the surface vertices outward by 1.5 x the
+        estimated chord sag of their facets (curvature from normals; flat facets and creases do not move),
+        so that the tets enclose the smooth shape the facets are chords of; ``False`` keeps the surface
+        vertices on the input surface (the tets' boundary is then the input facets). Default (None): on for
+        built-in shapes, off for loaded surfaces (on the coarse bunny it still leaves 18 of the OBJ's 502
+        vertices outside the tets and adds 10% of volume). gmsh's meshes are not affected.
     verbose : bool -- let gmsh print its progress
 
     Returns
@@ -104,10 +142,13 @@ def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | No
         points, tets = _gmsh_tets(surface, size, seed, feature_angle, verbose)
     else:
         shape = isinstance(surface, Shape)
+        if enclosing_band is None:
+            enclosing_band = shape
         if shape:
             surface = surface.surface(size=size)
-        points, tets = _delaunay_tets(surface, size, seed, movable_surface=shape)
+        points, tets = _delaunay_tets(surface, size, seed, movable_surface=shape, enclosing_band=enclosing_band,
+                                      feature_angle=feature_angle)
     mesh = TetMesh.compact(points, tets)
-    logger.info("%s: %d nodes, %d tets, volume %.6g (surface %.6g)", method, mesh.node_count,
-                mesh.tet_count, mesh.volume, volume)
+    logger.info("%s: %d nodes, %d tets, volume %.6g (surface %.6g, %+.2f%%)", method, mesh.node_count,
+                mesh.tet_count, mesh.volume, volume, 100 * excess_volume_fraction(mesh, volume))
     return mesh
