@@ -26,9 +26,10 @@ much more between Newton iterates than between time steps.
 
 Convergence: ||F_free|| <= rtol ||load_free||, where the load is everything but the springs (the
 scene's forces at x), or down to the round-off floor of the spring forces, whichever is larger:
-each node's spring force sums terms k (l - l0) whose lengths carry an error of eps l0, so the
-residual cannot be resolved below eps ||sum_s k_s l0_s||, the sum over the springs at each free
-node (a tet's forces likewise below eps 2 mu V |g| per corner: ``ElementSet.force_scale``) (measured: Newton stalls at 0.25 of this floor on a stiff beam, E = 1e10 to 1e14 Pa, where
+the positions carry an error of eps |x|, so each node's force, a sum of stiffness times
+displacement terms, cannot be resolved below eps |x|_max ||sum of its stiffnesses|| (the trace of its
+diagonal stiffness block: k per spring, 2 mu V |g|^2 per tet corner) (measured: Newton stalls below this
+floor on a stiff beam, E = 1e10 to 1e14 Pa, and on a strand of hair 10 m from the origin, where
 rtol = 1e-8 asked for the impossible and the solve was reported as failed). A scene without pins has no static equilibrium under a net load (the body
 would fall), and only one up to a rigid motion without: :func:`solve_static` refuses it.
 """
@@ -155,7 +156,7 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
         scale = max(float(np.linalg.norm(restrict(springs.forces))), np.finfo(float).tiny)
     residual = restrict(force)
     history = [float(np.linalg.norm(residual)) / scale]
-    target = max(rtol, _roundoff_floor(model, pattern) / scale)
+    target = max(rtol, _roundoff_floor(pattern, x) / scale)
     if target > rtol:
         logger.info("static solve: rtol %.3g is below the round-off floor of the spring forces; converging to %.3g",
                     rtol, target)
@@ -207,15 +208,18 @@ def _force_stiffness(scene, pattern, x, t):
     return sp.csr_matrix(-dfdx)[dofs][:, dofs]
 
 
-def _roundoff_floor(model, pattern) -> float:
-    """eps ||per free node, the summed force scales of the element sets|| [N]: the force resolution of their sums
-    (k l0 per spring, 2 mu V |g| per tet corner: :meth:`~volspring.elements.ElementSet.force_scale`)."""
-    per_node = np.zeros(model.node_count)
-    for element_set in model.elements:
-        scale = element_set.force_scale()
-        if scale is not None:
-            per_node += scale
-    return float(np.finfo(float).eps * np.sqrt(3.0) * np.linalg.norm(per_node[pattern.free_nodes]))
+def _roundoff_floor(pattern, x) -> float:
+    """eps |x|_max ||per free node, the trace of its diagonal stiffness block at rest|| [N]: the force resolution.
+
+    Positions carry an error of eps |x|, so every element's force an error of its stiffness times that (k eps |x|
+    for a spring, whatever its rest length; 2 mu V |g|^2 eps |x| for a tet corner). The trace of a node's
+    diagonal block at rest sums those stiffnesses (k per spring), for every element set alike; at rest, because
+    a crushed starting shape can make the current one arbitrarily large.
+    """
+    rest = pattern.linearize(pattern.model.rest_positions, stiffness_scale=1.0)
+    diagonal = np.abs(pattern.matrix(rest).diagonal()).reshape(-1, 3).sum(axis=1)
+    position = float(np.abs(x[pattern.free_nodes]).max()) if pattern.free_count else 0.0
+    return float(np.finfo(float).eps * np.sqrt(3.0) * position * np.linalg.norm(diagonal))
 
 
 def _newton_step(linear, pattern, linearization, extra, residual, shift, x, held=None):

@@ -204,12 +204,6 @@ class ElementSet(ABC):
                 blocks = blocks + damping_scale * damping
         return Linearization(self.forces(x, v), blocks, stiffness, self)
 
-    def force_scale(self) -> np.ndarray | None:
-        """(n,) float -- per node, the summed magnitudes of the set's forces per unit strain [N] (k l0 for a
-        spring): round-off in the positions, eps relative, makes force errors of eps times this, the floor a
-        static solve can resolve (:mod:`volspring.statics`). None (the default): no known scale."""
-        return None
-
     def renumbered(self, node_rank):
         """The set in another node numbering, elements reordered for locality, and the element order;
         None (the default) when the set is evaluated in the model's numbering.

@@ -94,14 +94,6 @@ class _TetContinuum(ElementSet):
             return None
         return self.stiffness_damping * self.stiffness_blocks(x)
 
-    def force_scale(self) -> np.ndarray:
-        """Per node, sum over its tets of (2 mu_t + kappa_t) V_t |g_ta|: the force of a unit strain at a corner."""
-        shear, bulk = self._tet_coefficients()
-        modulus = 2.0 * shear + bulk
-        kinematics = self.kinematics
-        corner = (modulus * kinematics.volumes)[:, None] * np.linalg.norm(kinematics.gradients, axis=2)
-        return np.bincount(kinematics.tets.ravel(), weights=corner.ravel(), minlength=self.node_count)
-
     def _scale(self, stiffness_scale, damping_scale) -> float:
         """c_K + c_D b: the factor of K in the system (the damping blocks are b K)."""
         return stiffness_scale + damping_scale * self.stiffness_damping
@@ -209,9 +201,6 @@ class CorotatedTets(_TetContinuum):
             projected = corotational(F)[2:] if not clamp_compression else (twists, coefficients)
             forces += self._damping_forces(*projected, v)
         return Linearization(forces, self._scale(stiffness_scale, damping_scale) * stiffness, stiffness, self)
-
-    def _tet_coefficients(self):
-        return self.shear, np.zeros_like(self.shear)
 
     def placed(self, rest_positions, node_map) -> "CorotatedTets":
         """The same tets and coefficients in another node numbering (``node_map[i]``: the new index of node i)
@@ -514,10 +503,6 @@ class NodalStrain(_TetContinuum):
         corner = self.domains.corner_domain[:, 0]
         return {"shear": self.shear[corner], "bulk": self.bulk[corner],
                 "regions": np.asarray(self.domains.region[corner], dtype=np.int64)}
-
-    def _tet_coefficients(self):
-        inputs = self.per_tet()
-        return inputs["shear"], inputs["bulk"]
 
     def placed(self, rest_positions, node_map) -> "NodalStrain":
         """The same set in another node numbering (``node_map[i]``: the new index of node i) and on other

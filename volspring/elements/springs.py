@@ -100,10 +100,6 @@ class Springs(ElementSet):
         r, length = self._directions(x)
         return self.incidence @ (self._magnitudes(r, length, v)[:, None] * r)
 
-    def force_scale(self) -> np.ndarray:
-        weight = self.stiffness * self.rest_lengths
-        return np.bincount(self.pairs.ravel(), weights=np.repeat(weight, 2), minlength=self.node_count)
-
     def energy(self, x) -> float:
         """Elastic energy sum 1/2 k_e (l - l0)^2 [J]."""
         _, length = self._directions(x)
