@@ -12,6 +12,7 @@ kernels :mod:`meshing.geometry` and every geometric tolerance :mod:`meshing.tole
 """
 
 from meshing.anchoring import Anchor, anchor
+from meshing.lattice import Lattice, LatticeAnchor, anchor_lattice, voxelize
 from meshing.mesh import TetMesh
 from meshing.quality import QualitySummary, min_dihedral_angles, quality_summary, radius_ratios
 from meshing.shapes import Shape, box, cylinder, ellipsoid, parse_shape, sphere, torus
@@ -24,6 +25,8 @@ from meshing.topology_io import read_topology, write_topology
 
 __all__ = [
     "Anchor",
+    "Lattice",
+    "LatticeAnchor",
     "QualitySummary",
     "Shape",
     "SpringTopology",
@@ -31,6 +34,7 @@ __all__ = [
     "TetMesh",
     "add_shells",
     "anchor",
+    "anchor_lattice",
     "box",
     "cylinder",
     "ellipsoid",
@@ -45,5 +49,6 @@ __all__ = [
     "structured_box",
     "tetrahedralize",
     "torus",
+    "voxelize",
     "write_topology",
 ]

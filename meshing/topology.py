@@ -12,7 +12,9 @@ from meshing.mesh import TetMesh
 __all__ = ["SPRING_KINDS", "SpringTopology", "vector_lengths"]
 
 #: Labels of the spring kinds, in the order of their integer codes in ``SpringTopology.kinds``.
-SPRING_KINDS = ("tet_edge", "shell", "shell_diagonal", "shell_edge")
+#: What each spring models; lattice bodies (meshing.lattice) add one kind per lattice family, in its order.
+SPRING_KINDS = ("tet_edge", "shell", "shell_diagonal", "shell_edge", "lattice_structural", "lattice_face",
+                "lattice_body", "lattice_bend")
 
 
 def vector_lengths(vectors) -> np.ndarray:

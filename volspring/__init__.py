@@ -3,6 +3,7 @@
 from volspring.checkpoint import load_checkpoint, save_checkpoint
 from volspring.constraints import DistanceConstraints, HalfSpace, StrainLimit
 from volspring.forces import CallableForce, Drag, Gravity, PointAttractor, PointRepulser, Vortex, Wind
+from volspring.lattice import lattice_body
 from volspring.material import Material
 from meshing.mesh import TetMesh
 from volspring.model import FORCE_LAWS, STIFFNESS_RULES, Model
@@ -47,6 +48,7 @@ __all__ = [
     "SpringTopology",
     "State",
     "TetMesh",
+    "lattice_body",
     "load_checkpoint",
     "load_model",
     "save_checkpoint",
