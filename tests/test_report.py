@@ -10,6 +10,7 @@ from validation.compare import tip_deflection
 from validation.cases import cantilever_gravity
 from validation.fem import solve_fem_static
 from validation.springs import spring_model, spring_static
+from validation.springs import VALIDATED_MODELS
 from meshing import TetMesh
 
 
@@ -38,7 +39,7 @@ def test_quick_writes_the_three_outputs(quick_run):
     rows = results["ladder"]["rows"]
     assert {(row["case"], row["rung"]) for row in rows} == {
         (case, rung) for case in ("cantilever_gravity", "cantilever_end_load", "hanging_bar", "uniaxial_compression",
-                                  "cantilever_modes") for rung in ("springs", "springs+volume", "smoothed")}
+                                  "cantilever_modes") for rung in VALIDATED_MODELS}
     assert page.index("<h2") == page.index("<h2 id='ladder'>") < page.index("<table")
 
 
@@ -50,8 +51,9 @@ def test_vtu_holds_fem_and_spring_shapes(quick_run):
     assert {"displacement_fem_P2", "displacement_springs_van_gelder", "error_springs_lloyd"} <= set(data.point_data)
     assert {"displacement_model_smoothed", "displacement_model_springs+volume"} <= set(data.point_data)
     side = TetMesh.read(out / "vtu" / "cantilever_gravity_side_by_side.vtu")
-    # P2, P1, three spring rules and the two upper rungs side by side (the springs rung is springs_van_gelder).
-    assert side.node_count == 7 * len(data.points)
+    # P2, P1, three spring rules, the two upper rungs and the lattice side by side (the springs rung is
+    # springs_van_gelder).
+    assert side.node_count == 8 * len(data.points)
 
 
 def test_results_agree_with_a_direct_computation(quick_run):
@@ -173,8 +175,7 @@ def test_own_mesh_run(beam_file, tmp_path):
     assert (out / "vtu" / "own_mesh.vtu").is_file()
     # Every rung on the user's mesh, and nothing else in the ladder.
     rows = results["ladder"]["rows"]
-    assert [(row["case"], row["rung"]) for row in rows] == [("own_mesh", rung)
-                                                           for rung in ("springs", "springs+volume", "smoothed")]
+    assert [(row["case"], row["rung"]) for row in rows] == [("own_mesh", rung) for rung in VALIDATED_MODELS]
     for row in rows:
         assert np.isfinite(row["tip_deflection_error"]) and row["block_count"] > 0
     assert rows[0]["tip_deflection_m"] == own["springs"]["van_gelder"]["tip_deflection_m"]  # the same answer

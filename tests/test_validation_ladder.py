@@ -13,6 +13,7 @@ from validation.compare import compare_static
 from validation.ladder import parse_models, run_ladder, rung_constants
 from validation.springs import deformed_volume_change, spring_static
 from volspring import Model
+from validation.springs import VALIDATED_MODELS
 from volspring.ladder import MODELS
 
 
@@ -31,7 +32,7 @@ def cube_ladder(tmp_path_factory):
 def test_every_rung_has_a_row_with_its_errors_cost_and_matrix_size(cube_ladder):
     case, ladder = cube_ladder
     rows = {row["rung"]: row for row in ladder["rows"]}
-    assert list(rows) == list(MODELS) and ladder["models"] == list(MODELS)
+    assert list(rows) == list(VALIDATED_MODELS) and ladder["models"] == list(VALIDATED_MODELS)
     for row in rows.values():
         assert row["case"] == "uniaxial_compression" and row["node_count"] == case.mesh.node_count == 27
         for key in ("tip_deflection_error", "volume_change_error_vs_fem", "E_effective_ratio", "nu_effective",
@@ -112,7 +113,7 @@ def test_volume_change_is_the_moved_mesh_volume_from_volspring_own_solve(cache_f
 def test_model_names_are_parsed_in_the_ladders_order():
     assert parse_models("smoothed,springs,smoothed") == ("springs", "smoothed")
     assert parse_models(" springs+volume ") == ("springs+volume",)
-    assert parse_models(list(MODELS)) == MODELS
+    assert parse_models(list(VALIDATED_MODELS)) == VALIDATED_MODELS
     with pytest.raises(ValueError, match=r"unknown model 'spring'; known: springs, springs\+volume, smoothed"):
         parse_models("spring")
 
@@ -168,7 +169,7 @@ def test_every_rung_runs_on_your_mesh_and_a_refusal_is_reported(tmp_path):
                    "--cache", str(tmp_path / "cache"), "--no-progress"])
     assert status == 0  # a rung that refuses nu = 0.05 is a result, not a failure
     rows = {row["rung"]: row for row in json.loads((out / "results.json").read_text())["ladder"]["rows"]}
-    assert list(rows) == list(MODELS)
+    assert list(rows) == list(VALIDATED_MODELS)  # the ladder's rungs and the lattice on the same nodes
     assert "cannot reach nu = 0.05" in rows["springs+volume"]["refused"]
     assert np.isfinite(rows["smoothed"]["tip_deflection_error"])
     assert "refused: model &#x27;springs+volume&#x27; cannot reach nu = 0.05" in (out / "report.html").read_text()
@@ -185,3 +186,20 @@ def test_held_out_shapes_are_measured_against_taylor_hood(cache_folder):
     assert row["reference"] == "TH"
     # Measured 0.993 of TH at alpha 0.65 (benchmarks/study_alpha.py); 3% is the issue's deflection goal.
     assert abs(row["tip_deflection_error"]) < 0.03
+
+
+def test_the_lattice_is_validated_beside_the_rungs_on_box_cases_and_refused_elsewhere(cube_ladder, cache_folder):
+    """The lattice body (volspring.lattice) on the same nodes as the box cases: its nu is the cubic lattice's
+    Cauchy limit, 1/4, whatever is asked (0.3 here); a held-out shape's mesh is no grid, so its row says why."""
+    from validation.heldout import build_heldout_case
+
+    _, ladder = cube_ladder
+    lattice = {row["rung"]: row for row in ladder["rows"]}["lattice"]
+    # E exact and nu = 1/4 by the rule (tests/test_lattice.py); 2e-3 is the geometric nonlinearity of the
+    # cube's 1e-3 strain.
+    assert lattice["nu_effective"] == pytest.approx(0.25, abs=2e-3)
+    assert lattice["E_effective_ratio"] == pytest.approx(1.0, abs=2e-3)
+    held_out = run_ladder([build_heldout_case("l_bracket_gravity", nu=0.3)], models=("lattice",), steps=1,
+                          folder=cache_folder)
+    (row,) = held_out["rows"]
+    assert "refused" in row and "not a structured box of cubic cells" in row["refused"]

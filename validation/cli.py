@@ -71,7 +71,7 @@ class _Bar:
 def _parser():
     from validation.report import BUILT_IN, HELDOUT, STUDIES
     from meshing.units import add_unit_arguments
-    from volspring.ladder import MODELS
+    from validation.springs import VALIDATED_MODELS
 
     parser = argparse.ArgumentParser(
         prog=PROG, description="Compare the ladder of models (springs, springs+volume, smoothed) with linear-elastic "
@@ -80,8 +80,9 @@ def _parser():
     parser.add_argument("cases", nargs="*", metavar="CASE",
                         help=f"cases and studies to run: {', '.join(BUILT_IN + HELDOUT + STUDIES)} (default: all, "
                              "the held-out shapes not with --quick; only your mesh with --mesh)")
-    parser.add_argument("--model", default=",".join(MODELS), metavar="NAME[,NAME...]",
-                        help=f"rungs of the ladder to validate: {', '.join(MODELS)} (default: all)")
+    parser.add_argument("--model", default=",".join(VALIDATED_MODELS), metavar="NAME[,NAME...]",
+                        help=f"models to validate: the ladder's rungs and the lattice, {', '.join(VALIDATED_MODELS)} "
+                             "(default: all)")
     parser.add_argument("--quick", action="store_true", help="coarse meshes and short runs (about a minute)")
     parser.add_argument("--out", required=True, metavar="DIR",
                         help="output folder; the same command run again replaces its report there")

@@ -25,8 +25,8 @@ import numpy as np
 
 from validation import cache
 from validation.cases import Case
-from validation.springs import deformed_volume_change, rung_model, spring_frequencies, spring_model, spring_static
-from volspring.ladder import MODELS
+from validation.springs import (VALIDATED_MODELS, deformed_volume_change, rung_model_or_refusal, spring_frequencies,
+                               spring_model, spring_static)
 
 __all__ = [
     "LADDER_RULE",
@@ -101,9 +101,9 @@ def _models(case: Case, rules, models, note):
     """Yield ``(group, name, model)``: ``("springs", rule, Model)`` for each rule, then ``("models", rung, ...)``
     for each rung, where ``...`` is the rung's Model, its refusal message (str), or None for the springs rung
     when :data:`LADDER_RULE` is among the rules (the same model: its answer is reused, not solved again)."""
-    unknown = [rung for rung in models if rung not in MODELS]
+    unknown = [rung for rung in models if rung not in VALIDATED_MODELS]
     if unknown:
-        raise ValueError(f"unknown model {unknown[0]!r}; known: {', '.join(MODELS)}")
+        raise ValueError(f"unknown model {unknown[0]!r}; known: {', '.join(VALIDATED_MODELS)}")
     for rule in rules:
         note(f"{case.name}: springs ({rule})")
         yield "springs", rule, spring_model(case.mesh, case.material, rule)
@@ -112,13 +112,7 @@ def _models(case: Case, rules, models, note):
             yield "models", rung, None
             continue
         note(f"{case.name}: model {rung}")
-        try:
-            model = rung_model(case.mesh, case.material, rung)
-        except ValueError as refusal:  # the one documented refusal: a nu below the spring network's own
-            if rung != "springs+volume":
-                raise
-            model = " ".join(str(refusal).split())
-        yield "models", rung, model
+        yield "models", rung, rung_model_or_refusal(case.mesh, case.material, rung)
 
 
 def _field_name(group: str, name: str) -> str:
@@ -147,7 +141,7 @@ def compare_static(case: Case, *, rules=RULES, models=(), elements=("P2", "P1"),
     ----------
     case : Case -- ``kind == "static"``
     rules : sequence of str -- spring stiffness rules (:data:`RULES`); results in ``results["springs"]``
-    models : sequence of str -- rungs of :data:`volspring.ladder.MODELS`; results in ``results["models"]``
+    models : sequence of str -- of :data:`validation.springs.VALIDATED_MODELS`; results in ``results["models"]``
         (a refused rung: ``{"refused": message}``)
     elements : sequence of {"P2", "P1"} -- the first is the reference
     folder : path, optional -- FEM cache folder (:func:`validation.cache.default_folder`)

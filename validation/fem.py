@@ -195,7 +195,6 @@ def solve_fem_static(mesh, material, *, clamp, gravity=None, traction=None, poin
     space = skfem_space(mesh, element)
     load = load_vector(space, density, gravity, body_force, tractions, point_forces)
     is_fixed, u = fixed_vector(space, fixed)
-    free = ~is_fixed
     if element == "TH":
         u, internal, solve, sizes, assembled = _solve_taylor_hood(mesh, space, E, nu, load, is_fixed, u, solver)
     else:

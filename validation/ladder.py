@@ -49,8 +49,7 @@ import numpy as np
 
 from validation.cases import CUBE, uniaxial_compression
 from validation.compare import LADDER_RULE, compare_modes, compare_static
-from validation.springs import case_scene, effective_constants, rung_model
-from volspring.ladder import MODELS
+from validation.springs import VALIDATED_MODELS, case_scene, effective_constants, rung_model_or_refusal
 from volspring.material import Material
 
 __all__ = ["FRAME_STEP_S", "FREQUENCY_COUNT", "LADDER_NUS", "STATIC_REFERENCE", "STEP_COUNT", "WARMUP_STEPS",
@@ -82,35 +81,27 @@ def parse_models(text) -> tuple:
     Raises
     ------
     ValueError
-        For an empty list or a name not in :data:`volspring.ladder.MODELS`, naming it.
+        For an empty list or a name not in :data:`validation.springs.VALIDATED_MODELS`, naming it.
     """
     names = [name.strip() for name in (text.split(",") if isinstance(text, str) else text)]
-    unknown = [name for name in names if name not in MODELS]
+    unknown = [name for name in names if name not in VALIDATED_MODELS]
     if unknown:
-        raise ValueError(f"unknown model {unknown[0]!r}; known: {', '.join(MODELS)} (comma-separated)")
+        raise ValueError(f"unknown model {unknown[0]!r}; known: {', '.join(VALIDATED_MODELS)} (comma-separated)")
     if not names:
-        raise ValueError(f"no model named; known: {', '.join(MODELS)}")
-    return tuple(rung for rung in MODELS if rung in names)
+        raise ValueError(f"no model named; known: {', '.join(VALIDATED_MODELS)}")
+    return tuple(rung for rung in VALIDATED_MODELS if rung in names)
 
 
 def _models_or_refusals(mesh, material, models) -> dict:
-    """rung -> its Model on ``mesh``, or its refusal message (str) for ``"springs+volume"`` below its nu."""
-    built = {}
-    for rung in models:
-        try:
-            built[rung] = rung_model(mesh, material, rung)
-        except ValueError as refusal:
-            if rung != "springs+volume":
-                raise
-            built[rung] = " ".join(str(refusal).split())
-    return built
+    """rung -> its Model on ``mesh``, or its refusal message (:func:`~validation.springs.rung_model_or_refusal`)."""
+    return {rung: rung_model_or_refusal(mesh, material, rung) for rung in models}
 
 
 def _nu_key(nu: float) -> str:
     return f"{float(nu):g}"
 
 
-def rung_constants(models=MODELS, nus=LADDER_NUS, *, cells: int = 4, strain: float = 1e-3) -> dict:
+def rung_constants(models=VALIDATED_MODELS, nus=LADDER_NUS, *, cells: int = 4, strain: float = 1e-3) -> dict:
     """Effective E and nu of each rung on the unit cube of the uniaxial case, for each asked nu.
 
     Parameters
@@ -140,7 +131,7 @@ def rung_constants(models=MODELS, nus=LADDER_NUS, *, cells: int = 4, strain: flo
     return table
 
 
-def step_costs(case, models=MODELS, *, dt: float = FRAME_STEP_S, steps: int = STEP_COUNT,
+def step_costs(case, models=VALIDATED_MODELS, *, dt: float = FRAME_STEP_S, steps: int = STEP_COUNT,
                warmup: int = WARMUP_STEPS) -> dict:
     """Cost of one implicit step of each rung on the case's scene, and the size of its matrix.
 
@@ -246,7 +237,8 @@ def case_rows(comparison, costs: dict) -> list:
     return rows
 
 
-def run_ladder(cases=(), *, comparisons=(), models=MODELS, folder=None, cells: int = 4, dt: float = FRAME_STEP_S,
+def run_ladder(cases=(), *, comparisons=(), models=VALIDATED_MODELS, folder=None, cells: int = 4,
+               dt: float = FRAME_STEP_S,
                steps: int = STEP_COUNT, progress=None) -> dict:
     """The ladder table: every rung on every case, with the rungs' effective constants.
 
@@ -276,7 +268,7 @@ def run_ladder(cases=(), *, comparisons=(), models=MODELS, folder=None, cells: i
     >>> from validation.ladder import run_ladder
     >>> ladder = run_ladder([uniaxial_compression(cells=2, nu=0.05)], cells=2, steps=1, folder=tempfile.mkdtemp())
     >>> [(row["rung"], "refused" in row) for row in ladder["rows"]]
-    [('springs', False), ('springs+volume', True), ('smoothed', False)]
+    [('springs', False), ('springs+volume', True), ('smoothed', False), ('lattice', False)]
     """
     note = progress or (lambda message: None)
     models = parse_models(models)

@@ -46,6 +46,7 @@ from meshing.mesh import TetMesh
 from validation.boundary import Box, Clamp
 from validation.cases import Case, check_held
 from volspring.forces import Gravity, PointLoads
+from volspring.ladder import MODELS
 from volspring.material import Material
 from volspring.model import Model
 from volspring.modes import solve_modes
@@ -54,6 +55,7 @@ from volspring.statics import solve_static
 from volspring.supports import Pins, Prescribed
 
 __all__ = [
+    "VALIDATED_MODELS",
     "SpringStatic",
     "case_scene",
     "case_supports",
@@ -61,6 +63,7 @@ __all__ = [
     "effective_constants",
     "held_nodes",
     "rung_model",
+    "rung_model_or_refusal",
     "spring_frequencies",
     "spring_model",
     "spring_static",
@@ -90,16 +93,38 @@ def spring_model(mesh: TetMesh, material: Material, rule: str, **options) -> Mod
     return Model.from_mesh(mesh, material, rule=rule, **options)
 
 
+#: What validation measures: the ladder's rungs and the lattice body (on the box cases; refused elsewhere).
+VALIDATED_MODELS = MODELS + ("lattice",)
+
+
 def rung_model(mesh: TetMesh, material: Material, rung: str, **options) -> Model:
     """The model of ``mesh`` on a rung of the ladder (:data:`volspring.ladder.MODELS`), by
-    :meth:`Model.from_mesh` itself: the springs rung with volspring's default rule (van Gelder).
+    :meth:`Model.from_mesh` itself (the springs rung with volspring's default rule, van Gelder), or
+    ``"lattice"``: the lattice body on the same nodes (:func:`volspring.lattice.box_lattice_model`), the
+    seed's first volumetric approach beside the tet springs.
 
     Raises
     ------
     ValueError
-        As :meth:`Model.from_mesh`: an unknown rung, or ``"springs+volume"`` below the network's own nu.
+        As :meth:`Model.from_mesh`: an unknown rung, or ``"springs+volume"`` below the network's own nu; for
+        ``"lattice"``, a mesh that is not a structured box of cubic cells.
     """
+    if rung == "lattice":
+        from volspring.lattice import box_lattice_model
+
+        return box_lattice_model(mesh, material, **options).model
     return Model.from_mesh(mesh, material, model=rung, **options)
+
+
+def rung_model_or_refusal(mesh: TetMesh, material: Material, rung: str) -> Model | str:
+    """:func:`rung_model`, or the one-line message of a documented refusal: ``"springs+volume"`` below the
+    network's own nu, ``"lattice"`` off a structured box. Any other error is raised."""
+    try:
+        return rung_model(mesh, material, rung)
+    except ValueError as refusal:
+        if rung not in ("springs+volume", "lattice"):
+            raise
+        return " ".join(str(refusal).split())
 
 
 def traction_forces(mesh: TetMesh, tractions) -> np.ndarray:

@@ -302,7 +302,11 @@ def box_lattice_model(mesh, material: Material, **options) -> LatticeBody:
     steps = [np.diff(np.unique(np.round((points[:, a] - low[a]) / (high[a] - low[a]) / GRID_MATCH) * GRID_MATCH))
              for a in range(3)]
     cells = [len(step) for step in steps]
-    lattice = box_lattice(cells, high - low, origin=low)
+    try:
+        lattice = box_lattice(cells, high - low, origin=low)
+    except ValueError as error:
+        raise ValueError(f"the mesh is not a structured box of cubic cells, which a lattice on the same nodes "
+                         f"needs ({error})") from None
     if lattice.node_count != mesh.node_count or not np.allclose(
             lattice.points, points, rtol=0, atol=GRID_MATCH * float(np.linalg.norm(high - low))):
         raise ValueError(f"the mesh's {mesh.node_count} nodes are not those of a {cells[0]} x {cells[1]} x {cells[2]} "

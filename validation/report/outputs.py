@@ -21,7 +21,7 @@ from validation.report import html as report_html
 from validation.report import runner
 from meshing._io import atomic_path
 from meshing.mesh import TetMesh
-from volspring.ladder import MODELS
+from validation.springs import VALIDATED_MODELS
 
 __all__ = ["read_results", "validate", "write_outputs"]
 
@@ -29,7 +29,7 @@ __all__ = ["read_results", "validate", "write_outputs"]
 # so that replacing one there (a test's monkeypatch) replaces what runs here.
 
 
-def validate(out, *, cases=None, quick: bool = False, own_case=None, rules=RULES, models=MODELS, folder=None,
+def validate(out, *, cases=None, quick: bool = False, own_case=None, rules=RULES, models=VALIDATED_MODELS, folder=None,
              progress=None, command=None, record=None) -> dict:
     """:func:`~validation.report.runner.run_validation` then :func:`write_outputs` into ``out``; returns the results.
 

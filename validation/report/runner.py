@@ -45,7 +45,7 @@ from validation import ladder, studies
 from validation.cases import build_case, uniaxial_compression
 from validation.compare import RULES, compare_modes, compare_static
 from validation.heldout import HELDOUT_CASE_NAMES
-from volspring.ladder import MODELS
+from validation.springs import VALIDATED_MODELS
 
 __all__ = ["BUILT_IN", "HELDOUT", "NOTES", "SCHEMA", "STATIC_CASES", "STUDIES", "SWEEP_NUS", "SWEEP_STRAINS", "UNITS",
            "run_validation", "versions"]
@@ -118,7 +118,7 @@ def _settings(quick: bool) -> dict:
             "cauchy_cells": 4}
 
 
-def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULES, models=MODELS, folder=None,
+def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULES, models=VALIDATED_MODELS, folder=None,
                    progress=None) -> tuple:
     """Run cases, the ladder and studies.
 
