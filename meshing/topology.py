@@ -12,9 +12,10 @@ from meshing.mesh import TetMesh
 __all__ = ["SPRING_KINDS", "SpringTopology", "vector_lengths"]
 
 #: Labels of the spring kinds, in the order of their integer codes in ``SpringTopology.kinds``.
-#: What each spring models; lattice bodies (meshing.lattice) add one kind per lattice family, in its order.
+#: What each spring models; lattice bodies (meshing.lattice) add one kind per lattice family, in its order, and
+#: cloth (volspring.structures) its three Provot families.
 SPRING_KINDS = ("tet_edge", "shell", "shell_diagonal", "shell_edge", "lattice_structural", "lattice_face",
-                "lattice_body", "lattice_bend")
+                "lattice_body", "lattice_bend", "cloth_structural", "cloth_shear", "cloth_bend")
 
 
 def vector_lengths(vectors) -> np.ndarray:

@@ -287,6 +287,8 @@ class StrainLimit(_PairProjection):
     compression : float, optional -- largest allowed shortening (l0 - l) / l0 [-], in (0, 1)
     iterations : int -- Gauss-Seidel sweeps per projection, >= 1 (keyword-only)
     tolerance : float -- stop once no spring exceeds its bound by more than this [-] (relative)
+    springs : (k,) int or (s,) bool, optional -- which of the model's springs to limit (default all;
+        cloth limits its structural and shear springs, :func:`volspring.structures.cloth_strain_limit`)
 
     Examples
     --------
@@ -300,15 +302,16 @@ class StrainLimit(_PairProjection):
     1.1
     """
 
-    def __init__(self, model, tau, *, compression=None, iterations=10, tolerance=0.0):
+    def __init__(self, model, tau, *, compression=None, iterations=10, tolerance=0.0, springs=None):
         if not (math.isfinite(tau) and tau > 0):
             raise ValueError(f"tau = {tau} is not > 0")
         if compression is not None and not (0.0 < compression < 1.0):
             raise ValueError(f"compression = {compression} is not in (0, 1)")
         self.tau = float(tau)
         self.compression = None if compression is None else float(compression)
-        super().__init__(model.masses, model.springs, model.rest_lengths, iterations=iterations, stiffness=1.0,
-                         tolerance=tolerance)
+        select = slice(None) if springs is None else np.asarray(springs)
+        super().__init__(model.masses, model.springs[select], model.rest_lengths[select], iterations=iterations,
+                         stiffness=1.0, tolerance=tolerance)
 
     def _targets(self, length, rest):
         low = 0.0 if self.compression is None else 1.0 - self.compression

@@ -1,4 +1,8 @@
-"""Strings and hair: one-dimensional bodies built as models of springs and angle springs.
+"""Strings, hair and cloth: bodies built as models of springs and angle springs.
+
+Cloth (:func:`cloth_grid`, :func:`cloth_mesh`, Provot 1995: structural, shear and bend springs, masses from
+the triangle areas, stiffness from the membrane's E t) is at the end of the module, with Provot's strain
+limit (:func:`cloth_strain_limit`). What follows here is about the one-dimensional bodies.
 
 Both builders return a plain :class:`~volspring.Model` (from :meth:`Model.from_arrays`, plus
 :class:`~volspring.elements.AngleSprings` through :meth:`Model.with_elements` for hair), so every
@@ -40,12 +44,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from volspring.elements import AngleSprings
+from meshing.topology import SPRING_KINDS, vector_lengths
+from volspring.elements import AngleSprings, Springs
 from volspring.elements.angles import DihedralSprings
 from volspring.material import _real_array, _real_number
 from volspring.model import Model
 
-__all__ = ["TWIST_MIN_TURN", "hair", "strand_points", "string"]
+__all__ = ["CLOTH_SPRING_KINDS", "TWIST_MIN_TURN", "cloth_grid", "cloth_mesh", "cloth_springs", "cloth_strain_limit",
+           "hair", "sheet_grid", "strand_points", "string"]
 
 #: Twist springs go on chains of joints that turn by at least this much at rest [rad]: the dihedral is
 #: undefined at a straight joint, and its spring stiffens out-of-plane bending by about 1 / turn^2 there.
@@ -278,4 +284,330 @@ def _positive(name, value) -> float:
 def _count(count) -> int:
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 2:
         raise ValueError(f"count = {count!r} nodes; expected an integer >= 2")
+    return int(count)
+
+
+# ---------------------------------------------------------------------------- cloth
+#: The spring kinds of a cloth and their labels in :data:`meshing.topology.SPRING_KINDS` (select them with
+#: :func:`cloth_springs`).
+CLOTH_SPRING_KINDS = {"structural": "cloth_structural", "shear": "cloth_shear", "bend": "cloth_bend"}
+
+
+def sheet_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))):
+    """A rectangle of (nx + 1) x (ny + 1) nodes and its triangles: the rest shape of :func:`cloth_grid`.
+
+    Parameters
+    ----------
+    width, height : float -- side lengths [m], > 0
+    nx, ny : int -- cells along the width and the height, >= 1
+    origin : (3,) float -- corner node 0 [m]
+    axes : ((3,) float, (3,) float) -- directions of the width and the height, orthogonal; a flag hangs
+        from its top edge with ``axes=((1, 0, 0), (0, 0, -1))``
+
+    Returns
+    -------
+    points : (n, 3) float -- node (i, j), i = 0 .. nx along the width, j = 0 .. ny along the height, is
+        number j (nx + 1) + i [m]; the corners are 0, nx, ny (nx + 1) and n - 1
+    triangles : (2 nx ny, 3) int -- every cell cut along its diagonal from node (i, j), normals along
+        axes[0] x axes[1] (the render surface; :func:`cloth_grid`'s springs do not depend on the cut)
+    """
+    width, height = _positive("width", width), _positive("height", height)
+    nx, ny = _cells("nx", nx), _cells("ny", ny)
+    origin = _point("origin", origin)
+    if len(axes) != 2:
+        raise ValueError(f"axes has {len(axes)} directions; expected 2 (width and height)")
+    u, v = _unit("axes[0]", axes[0]), _unit("axes[1]", axes[1])
+    if abs(float(u @ v)) > _ORTHOGONAL:
+        raise ValueError(f"axes = {[list(axes[0]), list(axes[1])]} are not orthogonal (cosine {float(u @ v):.3g})")
+    i, j = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1))
+    points = origin + (width / nx) * i.reshape(-1, 1) * u + (height / ny) * j.reshape(-1, 1) * v
+    a = _grid_nodes(nx, np.arange(nx), np.arange(ny))  # (ny, nx) corner (i, j) of every cell
+    b, c, d = a + 1, a + nx + 2, a + nx + 1
+    triangles = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
+    return points, triangles
+
+
+def cloth_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+               areal_density=None, mass=None, membrane_stiffness=None, stretch_stiffness=None,
+               shear_stiffness=None, bend_stiffness=0.0, damping=0.0) -> Model:
+    """A rectangular cloth after Provot (1995): structural, shear and bend springs on a grid of nodes.
+
+    On the grid of :func:`sheet_grid` (cells a = width / nx by b = height / ny): structural springs
+    join neighbours along the grid lines, shear springs both diagonals of every cell, bend springs
+    every second node along the grid lines ((i, j)-(i + 2, j) and (i, j)-(i, j + 2)). Masses are
+    lumped from the area: a quarter of every cell to each of its corners (the triangles of both
+    cuts of the cell, averaged).
+
+    The membrane rule (``membrane_stiffness`` = E t). A network of central springs is a membrane
+    with C_abcd = (1 / A) sum k l^2 n_a n_b n_c n_d (sum over the springs of an area A, n their
+    directions), whose C_1122 = C_1212 always: an isotropic one has nu = 1/3 (the Cauchy relation
+    in 2D), C_11 = 9/8 E t and C_12 = C_66 = 3/8 E t. Each cell gives each of its four structural
+    springs half of k_x = E t (9/8 b/a - 3/8 a/b) (along the width; k_y with a and b swapped) and
+    each diagonal k_d = 3/16 E t d^2 / (a b), d^2 = a^2 + b^2: springs inside the sheet get two
+    halves, springs on its edge one, and the sheet's energy under any small uniform strain is
+    exactly A/2 eps:C:eps of the isotropic membrane (E t, nu = 1/3). On square cells k_x = 3/4 E t,
+    k_d = 3/8 E t. A positive k_x needs cells with 1/sqrt(3) < a / b < sqrt(3).
+
+    Parameters
+    ----------
+    width, height, nx, ny, origin, axes : as for :func:`sheet_grid`
+    areal_density : float, optional -- mass per area [kg/m^2] ...
+    mass : float, optional -- ... or the total mass [kg] (one of the two)
+    membrane_stiffness : float, optional -- E t [N/m], the rule above ...
+    stretch_stiffness : float, optional -- ... or k of every structural spring [N/m] (one of the two)
+    shear_stiffness : float, optional -- k of every shear spring [N/m], with ``stretch_stiffness``
+        only; default half of it (the isotropic ratio on square cells)
+    bend_stiffness : float -- k of every bend spring [N/m], >= 0; 0 (default) adds none. A spring
+        across a straight run of the sheet resists a fold only to second order in the fold's angle
+        (no linear bending stiffness D), so this is a spring constant, not a plate's E t^3 / 12 (1 - nu^2)
+    damping : float -- damper of every spring k_d [N s/m], >= 0
+
+    Returns
+    -------
+    Model -- springs of kinds structural, shear and bend (:func:`cloth_springs`)
+
+    Examples
+    --------
+    A flag, 1 m by 0.6 m, 200 g/m^2, E t = 100 N/m, hanging in the xz plane from its top edge:
+
+    >>> from volspring.structures import cloth_grid, cloth_springs
+    >>> flag = cloth_grid(1.0, 0.6, 10, 6, axes=((1, 0, 0), (0, 0, -1)), areal_density=0.2,
+    ...                   membrane_stiffness=100.0, bend_stiffness=1.0)
+    >>> flag.node_count, round(flag.total_mass, 12), [int(cloth_springs(flag, kind).sum()) for kind in
+    ...                                                 ("structural", "shear", "bend")]
+    (77, 0.12, [136, 120, 118])
+    """
+    points, _ = sheet_grid(width, height, nx, ny, origin=origin, axes=axes)
+    a, b = float(width) / nx, float(height) / ny
+    cells = _grid_nodes(nx, np.arange(nx), np.arange(ny))
+    corners = np.stack([cells, cells + 1, cells + nx + 2, cells + nx + 1], -1).reshape(-1, 4)
+    masses = np.bincount(corners.ravel(), minlength=len(points)) * (0.25 * a * b)
+    masses = masses * _areal_density(a * b * nx * ny, areal_density, mass)
+
+    i, j = np.arange(nx + 1), np.arange(ny + 1)
+    along_width = _pairs(_grid_nodes(nx, i[:-1], j), 1)
+    along_height = _pairs(_grid_nodes(nx, i, j[:-1]), nx + 1)
+    diagonals = np.concatenate([_pairs(cells, nx + 2), _pairs(cells + 1, nx)])
+    bends = np.concatenate([_pairs(_grid_nodes(nx, i[:-2], j), 2), _pairs(_grid_nodes(nx, i, j[:-2]), 2 * (nx + 1))])
+    if membrane_stiffness is not None:
+        if stretch_stiffness is not None or shear_stiffness is not None:
+            raise ValueError(f"give membrane_stiffness= (E t) or stretch_stiffness= (with shear_stiffness=), not both "
+                             f"(membrane_stiffness = {membrane_stiffness}, stretch_stiffness = {stretch_stiffness}, "
+                             f"shear_stiffness = {shear_stiffness})")
+        membrane = _positive("membrane_stiffness", membrane_stiffness)
+        k_width, k_height = membrane * (9 / 8 * b / a - 3 / 8 * a / b), membrane * (9 / 8 * a / b - 3 / 8 * b / a)
+        if not (k_width > 0 and k_height > 0):
+            raise ValueError(f"cells of {a:.6g} m by {b:.6g} m (aspect {a / b:.4g}) have no isotropic spring "
+                             "network with positive stiffness; expected 1/sqrt(3) < a / b < sqrt(3) (choose nx, ny "
+                             "closer to the sheet's aspect), or give stretch_stiffness= and shear_stiffness=")
+        # Half of k per cell: two halves inside the sheet, one on its edge (j = 0 or ny; i = 0 or nx).
+        cells_width = (along_width // (nx + 1) > 0).astype(float) + (along_width // (nx + 1) < ny)
+        cells_height = (along_height % (nx + 1) > 0).astype(float) + (along_height % (nx + 1) < nx)
+        structural = np.concatenate([0.5 * k_width * cells_width[:, 0], 0.5 * k_height * cells_height[:, 0]])
+        shear = np.full(len(diagonals), 3 / 16 * membrane * (a * a + b * b) / (a * b))
+    else:
+        if stretch_stiffness is None:
+            raise ValueError("give membrane_stiffness= (E t [N/m]) or stretch_stiffness= (k [N/m]), one of the two")
+        k = _positive("stretch_stiffness", stretch_stiffness)
+        structural = np.full(len(along_width) + len(along_height), k)
+        shear = np.full(len(diagonals), 0.5 * k if shear_stiffness is None else _positive("shear_stiffness",
+                                                                                             shear_stiffness))
+    groups = {"structural": (np.concatenate([along_width, along_height]), structural), "shear": (diagonals, shear),
+              "bend": (bends, np.full(len(bends), _nonnegative("bend_stiffness", bend_stiffness)))}
+    return _cloth_model(points, masses, groups, damping)
+
+
+def cloth_mesh(points, triangles, *, areal_density=None, mass=None, membrane_stiffness=None, stretch_stiffness=None,
+               bend_stiffness=0.0, damping=0.0) -> Model:
+    """A cloth on any triangle mesh: structural springs on the edges, bend springs across them.
+
+    Structural springs are the triangles' edges; across each interior edge (two triangles) a bend
+    spring joins the two vertices opposite it (the triangles already hold the sheet's shear, so no
+    shear springs; on a grid cut into triangles the spring across a diagonal is the other diagonal,
+    a shear spring of :func:`cloth_grid`). Masses are lumped from the triangle areas, a third of
+    each triangle to each of its corners.
+
+    The membrane rule (``membrane_stiffness`` = E t): Van Gelder's, k_e = E t sum_T A_T / l_e^2 over
+    the one or two triangles T of edge e (Van Gelder, "Approximate simulation of elastic membranes
+    by triangulated spring meshes", JGT 3(2), 1998). Exact on equilateral triangles, whose network
+    is the isotropic membrane E t, nu = 1/3; an approximation on others (no choice of edge springs
+    is exact on every mesh, Van Gelder shows).
+
+    Parameters
+    ----------
+    points : (n, 3) float -- rest positions [m]
+    triangles : (m, 3) int -- node indices; every node in a triangle, every edge in at most two
+    areal_density : float, optional -- mass per area [kg/m^2] ...
+    mass : float, optional -- ... or the total mass [kg] (one of the two)
+    membrane_stiffness : float, optional -- E t [N/m], the rule above ...
+    stretch_stiffness : float, optional -- ... or k of every structural spring [N/m] (one of the two)
+    bend_stiffness : float -- k of every bend spring [N/m], >= 0; 0 (default) adds none (see
+        :func:`cloth_grid` for what a bend spring does and does not model)
+    damping : float -- damper of every spring k_d [N s/m], >= 0
+
+    Returns
+    -------
+    Model -- springs of kinds structural and bend (:func:`cloth_springs`)
+
+    Raises
+    ------
+    ValueError
+        Bad shapes, indices outside the nodes, non-finite points, a triangle of zero area, a node in
+        no triangle (it would have no mass), an edge in more than two triangles, naming the first.
+
+    Examples
+    --------
+    Two triangles of a unit square: 5 edges, 1 bend spring across the diagonal.
+
+    >>> from volspring.structures import cloth_mesh, cloth_springs
+    >>> square = cloth_mesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]],
+    ...                     areal_density=0.2, membrane_stiffness=100.0, bend_stiffness=1.0)
+    >>> [int(cloth_springs(square, kind).sum()) for kind in ("structural", "bend")], square.masses.round(12).tolist()
+    ([5, 1], [0.066666666667, 0.033333333333, 0.066666666667, 0.033333333333])
+    """
+    points = _real_array("points", points)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 3:
+        raise ValueError(f"points have shape {points.shape}; expected (n, 3) with n >= 3")
+    if not np.isfinite(points).all():
+        node = int(np.flatnonzero(~np.isfinite(points).all(axis=1))[0])
+        raise ValueError(f"points[{node}] = {points[node].tolist()} m is not finite")
+    triangles = np.asarray(triangles)
+    if triangles.ndim != 2 or triangles.shape[1] != 3 or not len(triangles) or triangles.dtype.kind not in "iu":
+        raise ValueError(f"triangles have shape {triangles.shape} and dtype {triangles.dtype}; expected (m, 3) "
+                         "integer node indices, m >= 1")
+    triangles = triangles.astype(np.int64)
+    outside = ((triangles < 0) | (triangles >= len(points))).any(axis=1)
+    if outside.any():
+        t = int(np.flatnonzero(outside)[0])
+        raise ValueError(f"triangles[{t}] = {triangles[t].tolist()} indexes a node outside [0, {len(points) - 1}]")
+    corners = points[triangles]
+    areas = 0.5 * vector_lengths(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]))
+    if not areas.min() > 0:
+        t = int(np.argmin(areas))
+        raise ValueError(f"triangles[{t}] = {triangles[t].tolist()} has area {areas[t]} m^2; expected > 0")
+    masses = np.bincount(triangles.ravel(), weights=np.repeat(areas / 3, 3), minlength=len(points))
+    if not masses.min() > 0:
+        node = int(np.argmin(masses))
+        raise ValueError(f"node {node} (at {points[node].tolist()} m) is in no triangle; it would have no mass")
+    masses = masses * _areal_density(areas.sum(), areal_density, mass)
+
+    # Every triangle's edges k -> k + 1 with the vertex opposite; an edge's occurrences grouped by np.unique.
+    directed = np.stack([triangles, np.roll(triangles, -1, axis=1)], -1).reshape(-1, 2)
+    opposite = np.roll(triangles, 1, axis=1).ravel()
+    edges, edge_of, counts = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True, return_counts=True)
+    edge_of = edge_of.ravel()
+    if counts.max() > 2:
+        e = int(np.argmax(counts))
+        raise ValueError(f"edge {edges[e].tolist()} is in {counts[e]} triangles; expected a surface, at most 2")
+    lengths = vector_lengths(points[edges[:, 1]] - points[edges[:, 0]])
+    if membrane_stiffness is not None:
+        if stretch_stiffness is not None:
+            raise ValueError(f"give membrane_stiffness= or stretch_stiffness=, not both (membrane_stiffness = "
+                             f"{membrane_stiffness}, stretch_stiffness = {stretch_stiffness})")
+        edge_areas = np.bincount(edge_of, weights=np.repeat(areas, 3), minlength=len(edges))
+        structural = _positive("membrane_stiffness", membrane_stiffness) * edge_areas / lengths**2
+    elif stretch_stiffness is None:
+        raise ValueError("give membrane_stiffness= (E t [N/m]) or stretch_stiffness= (k [N/m]), one of the two")
+    else:
+        structural = np.full(len(edges), _positive("stretch_stiffness", stretch_stiffness))
+    order = np.argsort(edge_of, kind="stable")
+    interior = order[counts[edge_of[order]] == 2].reshape(-1, 2)  # the two occurrences of each interior edge
+    bends = np.unique(np.sort(opposite[interior], axis=1), axis=0)
+    keys = lambda pairs: pairs[:, 0] * len(points) + pairs[:, 1]  # noqa: E731
+    bends = bends[(bends[:, 0] != bends[:, 1]) & ~np.isin(keys(bends), keys(edges))]  # e.g. on a closed tetrahedron
+    groups = {"structural": (edges, structural), "shear": (np.zeros((0, 2), dtype=np.int64), np.zeros(0)),
+              "bend": (bends, np.full(len(bends), _nonnegative("bend_stiffness", bend_stiffness)))}
+    return _cloth_model(points, masses, groups, damping)
+
+
+def cloth_springs(model, *kinds) -> np.ndarray:
+    """(s,) bool -- the springs of a cloth model of the given kinds ("structural", "shear", "bend")."""
+    unknown = [kind for kind in kinds if kind not in CLOTH_SPRING_KINDS]
+    if unknown or not kinds:
+        raise ValueError(f"kinds = {list(kinds)}; expected one or more of {list(CLOTH_SPRING_KINDS)}")
+    codes = [SPRING_KINDS.index(CLOTH_SPRING_KINDS[kind]) for kind in kinds]
+    return np.isin(model.kinds, codes)
+
+
+def cloth_strain_limit(model, tau=0.1, *, kinds=("structural", "shear"), iterations=20, tolerance=0.0,
+                       compression=None):
+    """Provot's strain limit on a cloth's springs: a constraint for ``Scene(..., constraints=[...])``.
+
+    After every step, each selected spring longer than (1 + tau) l0 is pulled back to (1 + tau) l0 by
+    moving its two nodes along it, mass-weighted (a pinned node does not move, the free one takes the
+    whole correction), Gauss-Seidel over colours of springs that share no node, ``iterations``
+    sweeps (:class:`volspring.constraints.StrainLimit`). Provot corrects positions only; here every
+    node's velocity also changes by its correction over the step, dv = dx / dt, so that the step's
+    velocity is again (x_new - x_start) / dt: the stretching motion the limit removes is gone from
+    v too (inelastic, as in position-based dynamics), and the next step does not pull the springs
+    out again.
+
+    Parameters
+    ----------
+    model : Model -- from :func:`cloth_grid` or :func:`cloth_mesh`
+    tau : float -- largest stretch (l - l0) / l0 [-], > 0 (Provot: 0.1)
+    kinds : sequence of str -- spring kinds limited (default structural and shear, as Provot did;
+        bend springs follow from them)
+    iterations : int -- Gauss-Seidel sweeps per step, >= 1; the correction at a pinned corner reaches
+        about one spring further per sweep, so large fine sheets need more sweeps, or ``tolerance``
+    tolerance : float -- stop sweeping once no spring exceeds its bound by more than this [-]
+    compression : float, optional -- also keep springs above (1 - compression) l0
+
+    Returns
+    -------
+    StrainLimit
+    """
+    from volspring.constraints import StrainLimit
+
+    select = cloth_springs(model, *kinds)
+    if not select.any():
+        raise ValueError(f"the model has no springs of kinds {list(kinds)} to limit ({model.kind_counts()})")
+    return StrainLimit(model, tau, compression=compression, iterations=iterations, tolerance=tolerance,
+                       springs=select)
+
+
+#: Two axes count as orthogonal when the cosine of their angle is below this: round-off of unit vectors
+#: typed with ~16 digits is 1e-16; 1e-9 lets through axes computed in float, refuses a visible skew.
+_ORTHOGONAL = 1e-9
+
+
+def _grid_nodes(nx, i, j) -> np.ndarray:
+    """(len(j), len(i)) int -- node numbers j (nx + 1) + i of the grid's nodes (i, j)."""
+    return np.asarray(j)[:, None] * (nx + 1) + np.asarray(i)[None, :]
+
+
+def _pairs(first, offset) -> np.ndarray:
+    """(k, 2) int -- springs from each node in ``first`` to the node ``offset`` numbers on."""
+    first = np.asarray(first, dtype=np.int64).ravel()
+    return np.column_stack([first, first + offset])
+
+
+def _cloth_model(points, masses, groups, damping) -> Model:
+    """A model of the springs in ``groups`` ({kind: (pairs, stiffness)}), kinds stored as CLOTH_SPRING_KINDS."""
+    kept = {kind: (pairs, k) for kind, (pairs, k) in groups.items() if len(pairs) and k.max() > 0}
+    pairs = np.concatenate([pairs for pairs, _ in kept.values()])
+    kinds = np.concatenate([np.full(len(p), SPRING_KINDS.index(CLOTH_SPRING_KINDS[kind])) for kind, (p, _) in
+                            kept.items()])
+    rest = vector_lengths(points[pairs[:, 1]] - points[pairs[:, 0]])
+    springs = Springs(len(points), pairs, np.concatenate([k for _, k in kept.values()]),
+                      _nonnegative("damping", damping), rest, kinds)
+    return Model(points, masses, (springs,))
+
+
+def _areal_density(area, areal_density, mass) -> float:
+    if (areal_density is None) == (mass is None):
+        raise ValueError("give areal_density= (kg/m^2) or mass= (kg), one of the two")
+    return _positive("areal_density", areal_density) if mass is None else _positive("mass", mass) / area
+
+
+def _nonnegative(name, value) -> float:
+    number = _real_number(name, value)
+    if not (np.isfinite(number) and number >= 0):
+        raise ValueError(f"{name} = {number} is not finite and >= 0")
+    return number
+
+
+def _cells(name, count) -> int:
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"{name} = {count!r} cells; expected an integer >= 1")
     return int(count)
