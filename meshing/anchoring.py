@@ -12,6 +12,7 @@ maps and the inside test are :func:`meshing.geometry.barycentric_frames`, shared
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 from functools import cached_property
@@ -36,8 +37,75 @@ NEAREST_CENTROIDS = 4
 GRID_REGISTRATIONS = 16
 
 
-@dataclass(frozen=True, eq=False)
-class Anchor:
+class WeightedAnchor:
+    """What every render-surface binding shares: each vertex a weighted sum of a few model nodes.
+
+    For frozen dataclasses with the fields ``nodes`` (p, k), ``weights`` (p, k), ``points``, ``faces``,
+    ``outside``, ``outside_distance`` and ``node_count`` (:class:`Anchor`: the 4 nodes of a tet by barycentric
+    weights; :class:`meshing.lattice.LatticeAnchor`: the 8 corners of a cell by trilinear weights).
+    """
+
+    #: What the nodes are, in messages.
+    node_owner = "the model's"
+
+    def __post_init__(self):
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name)
+            if isinstance(value, np.ndarray):
+                value = np.array(value, copy=True)
+                value.setflags(write=False)
+                object.__setattr__(self, field.name, value)
+
+    @property
+    def point_count(self) -> int:
+        return len(self.nodes)
+
+    @property
+    def outside_count(self) -> int:
+        """Number of surface vertices outside the body (anchored by extrapolation)."""
+        return int(self.outside.sum())
+
+    @property
+    def max_outside_distance(self) -> float:
+        """Largest distance from a surface vertex to the body [m]; 0 when all are inside."""
+        return float(self.outside_distance.max(initial=0.0))
+
+    @property
+    def min_weight(self) -> float:
+        """Smallest weight: below 0 only for vertices outside (how far they extrapolate)."""
+        return float(self.weights.min(initial=0.0))
+
+    @cached_property
+    def matrix(self):
+        """(p, n) scipy.sparse.csr_matrix -- the linear map from node positions to surface positions."""
+        from scipy.sparse import csr_matrix
+
+        rows = np.repeat(np.arange(self.point_count), self.nodes.shape[1])
+        return csr_matrix((self.weights.ravel(), (rows, self.nodes.ravel())), shape=(self.point_count, self.node_count))
+
+    def deform(self, x) -> np.ndarray:
+        """Surface vertex positions for deformed node positions.
+
+        Parameters
+        ----------
+        x : (n, 3) or (..., n, 3) float -- node positions [m]; leading axes are a batch (e.g. frames)
+
+        Returns
+        -------
+        (p, 3) or (..., p, 3) float -- the surface vertices [m]
+        """
+        x = np.asarray(x, dtype=np.float64)
+        if x.ndim < 2 or x.shape[-2:] != (self.node_count, 3):
+            raise ValueError(f"x must have shape (..., {self.node_count}, 3) ({self.node_owner} nodes), got {x.shape}")
+        return np.einsum("pj,...pjd->...pd", self.weights, x[..., self.nodes, :])
+
+    def __repr__(self) -> str:
+        return (f"{type(self).__name__}({self.point_count} vertices, {self.outside_count} outside, "
+                f"max distance outside {self.max_outside_distance:.3g}, min weight {self.min_weight:.3g})")
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class Anchor(WeightedAnchor):
     """A render surface bound to a tet mesh by barycentric weights (immutable).
 
     Parameters
@@ -62,62 +130,7 @@ class Anchor:
     outside_distance: np.ndarray
     node_count: int
 
-    def __post_init__(self):
-        for name in ("tet_index", "nodes", "weights", "points", "faces", "outside", "outside_distance"):
-            value = getattr(self, name)
-            if value is not None:
-                value = np.array(value, copy=True)
-                value.setflags(write=False)
-                object.__setattr__(self, name, value)
-
-    @property
-    def point_count(self) -> int:
-        return len(self.tet_index)
-
-    @property
-    def outside_count(self) -> int:
-        """Number of surface vertices outside every tet (anchored by extrapolation)."""
-        return int(self.outside.sum())
-
-    @property
-    def max_outside_distance(self) -> float:
-        """Largest distance from a surface vertex to the tet mesh [m]; 0 when all are inside."""
-        return float(self.outside_distance.max(initial=0.0))
-
-    @property
-    def min_weight(self) -> float:
-        """Smallest barycentric weight: below 0 only for vertices outside (how far they extrapolate)."""
-        return float(self.weights.min(initial=0.0))
-
-    @cached_property
-    def matrix(self):
-        """(p, n) scipy.sparse.csr_matrix -- the linear map from tet node positions to surface positions."""
-        from scipy.sparse import csr_matrix
-
-        rows = np.repeat(np.arange(self.point_count), 4)
-        return csr_matrix((self.weights.ravel(), (rows, self.nodes.ravel())), shape=(self.point_count, self.node_count))
-
-    def deform(self, x) -> np.ndarray:
-        """Surface vertex positions for deformed tet node positions.
-
-        Parameters
-        ----------
-        x : (n, 3) or (..., n, 3) float -- tet node positions [m]; leading axes are a batch (e.g. frames)
-
-        Returns
-        -------
-        (p, 3) or (..., p, 3) float -- the surface vertices [m]
-        """
-        x = np.asarray(x, dtype=np.float64)
-        if x.ndim < 2 or x.shape[-2:] != (self.node_count, 3):
-            raise ValueError(f"x must have shape (..., {self.node_count}, 3) (the tet mesh's nodes), got {x.shape}")
-        return np.einsum("pj,...pjd->...pd", self.weights, x[..., self.nodes, :])
-
-    def __repr__(self) -> str:
-        return (
-            f"Anchor({self.point_count} vertices, {self.outside_count} outside, "
-            f"max distance outside {self.max_outside_distance:.3g}, min weight {self.min_weight:.3g})"
-        )
+    node_owner = "the tet mesh's"
 
 
 def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = ON_SURFACE, max_distance: float | None = None) -> Anchor:

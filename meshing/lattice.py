@@ -45,7 +45,7 @@ from functools import cached_property
 
 import numpy as np
 
-from meshing.anchoring import _surface_arrays
+from meshing.anchoring import WeightedAnchor, _surface_arrays
 
 __all__ = ["CORNERS", "LATTICE_FAMILIES", "Lattice", "LatticeAnchor", "anchor_lattice", "box_lattice", "voxelize"]
 
@@ -384,8 +384,8 @@ def voxelize(surface, cell_size: float, *, samples: int = 4) -> Lattice:
 
 
 # ---------------------------------------------------------------------------- anchoring
-@dataclass(frozen=True, eq=False)
-class LatticeAnchor:
+@dataclass(frozen=True, eq=False, repr=False)
+class LatticeAnchor(WeightedAnchor):
     """A render surface bound to a lattice by trilinear weights (the interface of :class:`meshing.Anchor`).
 
     Parameters
@@ -410,48 +410,7 @@ class LatticeAnchor:
     outside_distance: np.ndarray
     node_count: int
 
-    def __post_init__(self):
-        for name in ("cell_index", "nodes", "weights", "points", "faces", "outside", "outside_distance"):
-            value = getattr(self, name)
-            if value is not None:
-                value = np.array(value, copy=True)
-                value.setflags(write=False)
-                object.__setattr__(self, name, value)
-
-    @property
-    def point_count(self) -> int:
-        return len(self.cell_index)
-
-    @property
-    def outside_count(self) -> int:
-        return int(self.outside.sum())
-
-    @property
-    def max_outside_distance(self) -> float:
-        return float(self.outside_distance.max(initial=0.0))
-
-    @property
-    def min_weight(self) -> float:
-        return float(self.weights.min(initial=0.0))
-
-    @cached_property
-    def matrix(self):
-        """(p, n) scipy.sparse.csr_matrix -- the linear map from lattice node positions to surface positions."""
-        from scipy.sparse import csr_matrix
-
-        rows = np.repeat(np.arange(self.point_count), 8)
-        return csr_matrix((self.weights.ravel(), (rows, self.nodes.ravel())), shape=(self.point_count, self.node_count))
-
-    def deform(self, x) -> np.ndarray:
-        """(p, 3) or (..., p, 3) float -- surface vertices [m] for lattice node positions x (..., n, 3) [m]."""
-        x = np.asarray(x, dtype=np.float64)
-        if x.ndim < 2 or x.shape[-2:] != (self.node_count, 3):
-            raise ValueError(f"x must have shape (..., {self.node_count}, 3) (the lattice's nodes), got {x.shape}")
-        return np.einsum("pj,...pjd->...pd", self.weights, x[..., self.nodes, :])
-
-    def __repr__(self) -> str:
-        return (f"LatticeAnchor({self.point_count} vertices, {self.outside_count} outside, "
-                f"max distance outside {self.max_outside_distance:.3g}, min weight {self.min_weight:.3g})")
+    node_owner = "the lattice's"
 
 
 def anchor_lattice(lattice: Lattice, surface) -> LatticeAnchor:
