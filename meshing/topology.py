@@ -9,13 +9,22 @@ import numpy as np
 
 from meshing.mesh import TetMesh
 
-__all__ = ["SPRING_KINDS", "SpringTopology", "vector_lengths"]
+__all__ = ["SPRING_KINDS", "SpringTopology", "TOPOLOGY_KINDS", "kind_counts", "vector_lengths"]
 
 #: Labels of the spring kinds, in the order of their integer codes in ``SpringTopology.kinds``.
 #: What each spring models; lattice bodies (meshing.lattice) add one kind per lattice family, in its order, and
 #: cloth (volspring.structures) its three Provot families.
 SPRING_KINDS = ("tet_edge", "shell", "shell_diagonal", "shell_edge", "lattice_structural", "lattice_face",
                 "lattice_body", "lattice_bend", "cloth_structural", "cloth_shear", "cloth_bend")
+#: The kinds a spring topology (a tet mesh and its virtual shells) is made of.
+TOPOLOGY_KINDS = SPRING_KINDS[:4]
+
+
+def kind_counts(kinds) -> dict:
+    """Number of springs of each kind, by label: every kind of a topology (:data:`TOPOLOGY_KINDS`, zero where
+    absent) and any other kind present."""
+    counts = np.bincount(np.asarray(kinds, dtype=np.int64), minlength=len(SPRING_KINDS))
+    return {name: int(count) for name, count in zip(SPRING_KINDS, counts) if name in TOPOLOGY_KINDS or count}
 
 
 def vector_lengths(vectors) -> np.ndarray:
@@ -144,9 +153,8 @@ class SpringTopology:
         return self.kinds == SPRING_KINDS.index(kind)
 
     def kind_counts(self) -> dict:
-        """Number of springs of each kind, by label (every kind present, zero where absent)."""
-        counts = np.bincount(self.kinds, minlength=len(SPRING_KINDS))
-        return {name: int(count) for name, count in zip(SPRING_KINDS, counts)}
+        """Number of springs of each kind, by label (:func:`kind_counts`)."""
+        return kind_counts(self.kinds)
 
     def __repr__(self) -> str:
         kinds = ", ".join(f"{count} {name}" for name, count in self.kind_counts().items() if count)

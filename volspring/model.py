@@ -25,7 +25,7 @@ from volspring.elements.spring_rules import FORCE_LAWS, STIFFNESS_RULES, _effect
 from volspring.elements.springs import checked_pairs, per_item_array
 from volspring.material import Material, _real_array, _real_number, _shown
 from meshing.mesh import TetMesh
-from meshing.topology import SPRING_KINDS, SpringTopology, vector_lengths
+from meshing.topology import SpringTopology, kind_counts, vector_lengths
 
 __all__ = ["STIFFNESS_RULES", "FORCE_LAWS", "Model"]
 
@@ -396,8 +396,8 @@ class Model:
         return self.spring_elements.difference
 
     def kind_counts(self) -> dict:
-        counts = np.bincount(self.kinds, minlength=len(SPRING_KINDS))
-        return {name: int(count) for name, count in zip(SPRING_KINDS, counts)}
+        """Number of springs of each kind, by label (:func:`meshing.topology.kind_counts`)."""
+        return kind_counts(self.kinds)
 
     def __repr__(self) -> str:
         others = "".join(f", {type(e).__name__} x {e.element_count}" for e in self.elements if not isinstance(e, Springs))
