@@ -335,3 +335,83 @@ def test_example_scripts_write_line_series(tmp_path, script, name):
     assert [block.type for block in lines.cells] == ["line"]
     assert np.isfinite(lines.points).all()
     assert (tmp_path / "out" / f"{name}.pc2").is_file()
+
+
+# ---------------------------------------------------------------------- the closed-form projection of the angle Hessian
+def _joint_matrices(blocks):
+    """(e, 9, 9) -- each joint's node blocks (e, 9, 3, 3) as one matrix."""
+    return blocks.reshape(-1, 3, 3, 3, 3).transpose(0, 1, 3, 2, 4).reshape(-1, 9, 9)
+
+
+@pytest.mark.parametrize("name", ["bent_rest", "straight_rest"])
+def test_projected_angle_blocks_are_the_eigen_projection_in_edge_units(name):
+    """The closed form is what an eigh of each joint's 6 x 6 Hessian in (da / |a|, db / |b|) with the negative
+    eigenvalues set to 0 gives, taken back to the nodes (the module docstring); and each joint's 9 x 9 is PSD."""
+    rng = np.random.default_rng(RNG_SEED + 5)
+    angles = _angle_sets(rng)[name]
+    x = rng.standard_normal((8, 3))
+    i, j, k = angles.triples.T
+    la, lb = np.linalg.norm(x[j] - x[i], axis=1), np.linalg.norm(x[k] - x[j], axis=1)
+    exact = angles.stiffness_blocks(x, clamp_compression=False).reshape(-1, 3, 3, 3, 3)
+    scaled = np.zeros((len(la), 6, 6))  # the edge Hessian in units of the edge lengths
+    scaled[:, :3, :3] = exact[:, 0, 0] * (la * la)[:, None, None]
+    scaled[:, :3, 3:] = -exact[:, 0, 2] * (la * lb)[:, None, None]
+    scaled[:, 3:, :3] = np.swapaxes(scaled[:, :3, 3:], 1, 2)
+    scaled[:, 3:, 3:] = exact[:, 2, 2] * (lb * lb)[:, None, None]
+    values, vectors = np.linalg.eigh(scaled)
+    assert (values < 0).any(axis=1).all()  # away from rest every joint is indefinite: the projection acts
+    clamped = (vectors * np.maximum(values, 0.0)[:, None, :]) @ np.swapaxes(vectors, 1, 2)
+    incidence = np.array([[-1.0, 0.0], [1.0, -1.0], [0.0, 1.0]])  # nodes from edges: a = x_j - x_i, b = x_k - x_j
+    lengths = np.stack([la, lb], axis=1)
+    D = np.einsum("pr,xy,er->eprxy", incidence, np.eye(3), 1.0 / lengths).reshape(-1, 3, 2, 3, 3)
+    D = D.transpose(0, 1, 3, 2, 4).reshape(-1, 9, 6)  # node displacements -> (da / |a|, db / |b|), transposed
+    expected = D @ clamped @ np.swapaxes(D, 1, 2)
+    projected = _joint_matrices(angles.stiffness_blocks(x))
+    # Two routes to one matrix: eigh and the closed form agree to round-off (1e-12 relative; measured 5e-15).
+    assert np.abs(projected - expected).max() <= 1e-12 * np.abs(expected).max()
+    assert np.array_equal(projected, np.swapaxes(projected, 1, 2))  # exactly symmetric, by construction
+    assert np.linalg.eigvalsh(projected).min() >= -1e-12 * np.abs(projected).max()  # PSD to round-off
+
+
+@pytest.mark.parametrize("offset", [0.0, 1e-9, 1e-3])
+def test_projected_angle_blocks_are_the_exact_hessian_at_rest(offset):
+    """At rest the Hessian k grad theta grad theta^T is PSD and the projection leaves it alone; at a straight
+    rest too (offset 0: no plane at all), and close to rest the projection moves it by O(delta) only."""
+    rng = np.random.default_rng(RNG_SEED + 6)
+    x = rng.standard_normal((8, 3))
+    triples = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4], [3, 4, 5], [5, 6, 7], [7, 2, 0]])
+    line = np.column_stack([np.arange(5.0), np.zeros(5), np.zeros(5)])
+    for positions, joints in ((x, triples), (line, triples[:3])):
+        at_rest = AngleSprings.at_rest(positions, joints, rng.uniform(0.5, 2.0, len(joints)))
+        moved = positions + offset * rng.standard_normal(positions.shape)
+        exact = _joint_matrices(at_rest.stiffness_blocks(moved, clamp_compression=False))
+        projected = _joint_matrices(at_rest.stiffness_blocks(moved))
+        # At rest: round-off (phi - phi0 ~ 1e-16); moved by 1e-9 or 1e-3: the clamped eigenvalues are O(k delta).
+        assert np.abs(projected - exact).max() <= max(1e-12, 10 * offset) * np.abs(exact).max()
+    # Negative control: far from rest the projection does change the Hessian.
+    bent = AngleSprings(8, triples, 1.0, rng.uniform(0.2, 3.0, len(triples)))
+    exact = _joint_matrices(bent.stiffness_blocks(x, clamp_compression=False))
+    assert np.abs(_joint_matrices(bent.stiffness_blocks(x)) - exact).max() > 1e-2 * np.abs(exact).max()
+
+
+def test_angle_linearization_products_and_straight_joints():
+    """The linearization's dF/dx @ u (through the edge blocks) is the product with its node blocks; a joint
+    exactly straight gives finite, PSD blocks whether its rest is straight or bent (a cone point)."""
+    rng = np.random.default_rng(RNG_SEED + 7)
+    angles = _angle_sets(rng)["bent_rest"]
+    x, u = rng.standard_normal((8, 3)), rng.standard_normal((8, 3))
+    linearization = angles.linearize(x, stiffness_scale=0.25)
+    blocks = angles.stiffness_blocks(x)
+    np.testing.assert_allclose(linearization.blocks, 0.25 * blocks, rtol=1e-15, atol=0)  # one scaling, round-off
+    np.testing.assert_allclose(linearization.stiffness, blocks, rtol=0, atol=0)
+    expected = -_block_product(angles, blocks, u)
+    # Same sums in another order: round-off, 1e-12 relative.
+    assert np.abs(linearization.dfdx_times(u) - expected).max() <= 1e-12 * np.abs(expected).max()
+    line = np.column_stack([np.arange(3.0), np.zeros(3), np.zeros(3)])
+    for rest in (np.pi, 2.0):
+        joint = AngleSprings(3, [[0, 1, 2]], 1.0, rest)
+        for clamp in (True, False):
+            matrix = _joint_matrices(joint.stiffness_blocks(line, clamp_compression=clamp))[0]
+            assert np.isfinite(matrix).all()
+            if clamp:
+                assert np.linalg.eigvalsh(matrix).min() >= -1e-12 * np.abs(matrix).max()
