@@ -51,7 +51,7 @@ from volspring.material import _real_array, _real_number
 from volspring.model import Model
 
 __all__ = ["CLOTH_SPRING_KINDS", "TWIST_MIN_TURN", "cloth_grid", "cloth_mesh", "cloth_springs", "cloth_strain_limit",
-           "hair", "sheet_grid", "strand_points", "string"]
+           "combine", "hair", "sheet_grid", "strand_points", "string"]
 
 #: Twist springs go on chains of joints that turn by at least this much at rest [rad]: the dihedral is
 #: undefined at a straight joint, and its spring stiffens out-of-plane bending by about 1 / turn^2 there.
@@ -611,3 +611,101 @@ def _cells(name, count) -> int:
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise ValueError(f"{name} = {count!r} cells; expected an integer >= 1")
     return int(count)
+
+
+# ---------------------------------------------------------------------------- several models in one
+def combine(models) -> Model:
+    """One model from several: a meshed model (tet bodies) first, then cloths, strings and hair.
+
+    The nodes are numbered model after model (model k's node i is ``offsets[k] + i``, ``offsets`` the
+    running sum of the node counts), and every body of model k keeps its own body id plus the number
+    of bodies before it: a cloth joined to ``Model.from_bodies([...])`` is one body more, with the
+    material ``None`` (it has no volume; its contact takes ``stiffness=`` or the solid's rule).
+    Springs join into one :class:`~volspring.elements.Springs`; angle and dihedral springs and the
+    continuum element sets are renumbered.
+
+    Only the first model may come from a tet mesh (``topology`` not None): the combined topology is
+    its own, with the other models' nodes after its nodes (shell layer 0; they belong to no tet), so
+    that :class:`~volspring.collision.ContactForce` collides the tet bodies as before and
+    :class:`~volspring.collision.thin.ThinContactForce` finds the thin bodies after them.
+
+    Parameters
+    ----------
+    models : sequence of Model -- at least one
+
+    Returns
+    -------
+    Model -- ``node_body``, ``materials`` and ``body_names`` joined; ``rule`` and ``rung`` the common
+    ones, or "mixed"
+
+    Raises
+    ------
+    TypeError
+        An item that is not a Model, or an element set that cannot be renumbered, naming it.
+    ValueError
+        No model, or a model with a tet mesh after the first.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from volspring.structures import cloth_grid, combine, string
+    >>> sheet = cloth_grid(1.0, 1.0, 2, 2, areal_density=0.2, membrane_stiffness=100.0)
+    >>> rope = string([0, 0, 1], [1, 0, 1], count=3, mass=0.1, stiffness=50.0)
+    >>> both = combine([sheet, rope])
+    >>> both.node_count, both.body_count, both.node_body[-3:].tolist(), both.springs[-2:].tolist()
+    (12, 2, [1, 1, 1], [[9, 10], [10, 11]])
+    """
+    from dataclasses import replace
+
+    from meshing.topology import SpringTopology
+    from volspring.elements.angles import AngleSprings, DihedralSprings
+
+    models = list(models)
+    if not models:
+        raise ValueError("combine needs at least one model, got none")
+    for index, model in enumerate(models):
+        if not isinstance(model, Model):
+            raise TypeError(f"models[{index}] is a {type(model).__name__}; expected a volspring.Model")
+        if index and model.topology is not None:
+            raise ValueError(f"models[{index}] has a tet mesh; only models[0] may (the mesh nodes come first): "
+                             "join tet bodies with Model.from_bodies, then combine the result with the others")
+    counts = np.array([model.node_count for model in models])
+    offsets = np.concatenate([[0], np.cumsum(counts)])
+    n = int(offsets[-1])
+    points = np.concatenate([model.rest_positions for model in models])
+    body_offsets = np.concatenate([[0], np.cumsum([model.body_count for model in models])])
+    node_body = np.concatenate([model.node_body + body_offsets[k] for k, model in enumerate(models)])
+    springs = [model.spring_elements for model in models]
+    pairs = np.concatenate([s.pairs + offset for s, offset in zip(springs, offsets)]).reshape(-1, 2)
+    kinds = np.concatenate([s.kinds for s in springs])
+    spring_set = Springs(n, pairs, np.concatenate([s.stiffness for s in springs]),
+                         np.concatenate([s.damping for s in springs]),
+                         np.concatenate([s.rest_lengths for s in springs]), kinds)
+    others = []
+    for k, model in enumerate(models):  # a loop over models and their element sets, not over nodes
+        node_map = offsets[k] + np.arange(model.node_count)
+        for element_set in model.elements:
+            if isinstance(element_set, Springs):
+                continue
+            if isinstance(element_set, AngleSprings):
+                others.append(replace(element_set, node_count=n, triples=node_map[element_set.triples]))
+            elif isinstance(element_set, DihedralSprings):
+                others.append(replace(element_set, node_count=n, quads=node_map[element_set.quads]))
+            elif hasattr(element_set, "placed"):
+                others.append(element_set.placed(points, node_map))
+            else:
+                raise TypeError(f"models[{k}] holds a {type(element_set).__name__}, which combine cannot renumber")
+    topology = models[0].topology
+    if topology is not None and len(models) > 1:
+        topology = SpringTopology(topology.mesh, points, pairs, kinds, topology.shell_triangles,
+                                  np.concatenate([topology.shell_layer, np.zeros(n - topology.node_count, np.int64)]),
+                                  topology.shell_thickness)
+    materials = sum((tuple(model.materials) for model in models), ())
+    names = sum((tuple(model.body_names) for model in models), ())
+    rules, rungs = {model.rule for model in models}, {model.rung for model in models}
+    elements = ((spring_set,) if spring_set.spring_count or not others else ()) + tuple(others)
+    common = {material for material in materials}
+    return Model(points, np.concatenate([model.masses for model in models]), elements, topology=topology,
+                 material=common.pop() if len(common) == 1 else None, rule=rules.pop() if len(rules) == 1 else "mixed",
+                 node_body=node_body, materials=materials, body_names=names,
+                 rung=rungs.pop() if len(rungs) == 1 else "mixed")

@@ -7,6 +7,10 @@ The data path reads one way::
     depths = consistent_penetration_depths(bodies, positions, contacts)   # Heidelberger et al. 2004
     obstacle = obstacle_contacts(obstacles, positions)    # volspring.HalfSpace and static triangle meshes
 
+Thin bodies (cloth, strings, hair: nodes without tets) collide with a ``thickness``: against obstacles
+(``ObstacleContactForce(..., thickness=)``), against tet bodies (:class:`ThinContactForce`) and a cloth
+with itself (:class:`ClothSelfContactForce`); :mod:`volspring.collision.thin`.
+
 and the response turns depths and directions into penalty forces::
 
     model = Model.from_bodies([Body(mesh, material, translation=...), ...])   # one model, many bodies
@@ -25,8 +29,10 @@ from volspring.collision.penetration import (
     consistent_penetration_depths,
 )
 from volspring.collision.spatial_hash import SpatialHash, VertexTetContacts, detect_collisions
+from volspring.collision.thin import ClothSelfContactForce, ThinContactForce
 
 __all__ = [
+    "ClothSelfContactForce",
     "CollisionBodies",
     "ContactForce",
     "ObstacleContactForce",
@@ -35,6 +41,7 @@ __all__ = [
     "PenetrationDepths",
     "SpatialHash",
     "StaticTriangleMesh",
+    "ThinContactForce",
     "VertexTetContacts",
     "closest_surface_depths",
     "consistent_penetration_depths",

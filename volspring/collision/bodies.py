@@ -68,11 +68,16 @@ class CollisionBodies:
         them, in the model's order; ``model_nodes`` maps the global ids back to model nodes (for a
         model from :meth:`Model.from_bodies <volspring.Model.from_bodies>`, ``arange(N)``).
 
+        Bodies numbered after every body of the mesh, with no mesh node (a cloth or a string joined to
+        the tet bodies by :func:`volspring.structures.combine`), are not part of the result:
+        ``body_count`` is then less than ``model.body_count``, and the body ids of both agree.
+
         Raises
         ------
         ValueError
-            For a model without a tet mesh (built from arrays), a body with no tet, or a tet whose
-            nodes belong to different bodies (naming the tet).
+            For a model without a tet mesh (built from arrays), a body with no tet (other than those
+            trailing bodies without mesh nodes), or a tet whose nodes belong to different bodies
+            (naming the tet).
 
         Examples
         --------
@@ -97,16 +102,17 @@ class CollisionBodies:
             tet = int(np.flatnonzero(mixed)[0])
             raise ValueError(f"tet {tet} = {mesh.tets[tet].tolist()} joins nodes of bodies "
                              f"{node_body[mesh.tets[tet]].tolist()}; expected every tet within one body")
-        tet_counts = np.bincount(tet_body, minlength=model.body_count)
+        body_count = int(node_body.max()) + 1  # bodies after the last meshed one have no mesh node
+        tet_counts = np.bincount(tet_body, minlength=body_count)
         if (tet_counts == 0).any():
             body = int(np.flatnonzero(tet_counts == 0)[0])
             raise ValueError(f"body {body} has no tet in the model's mesh; expected a tet mesh for every body")
         order = np.argsort(node_body, kind="stable")  # model node of each global id, body after body
-        offsets = np.concatenate([[0], np.cumsum(np.bincount(node_body, minlength=model.body_count))])
+        offsets = np.concatenate([[0], np.cumsum(np.bincount(node_body, minlength=body_count))])
         local = np.empty(mesh.node_count, dtype=np.int64)
         local[order] = np.arange(mesh.node_count) - np.repeat(offsets[:-1], np.diff(offsets))
         meshes = tuple(TetMesh(mesh.points[order[offsets[b]:offsets[b + 1]]], local[mesh.tets[tet_body == b]])
-                       for b in range(model.body_count))  # a loop over bodies
+                       for b in range(body_count))  # a loop over bodies
         return cls(meshes, order)
 
     # ------------------------------------------------------------------ numbering

@@ -77,7 +77,17 @@ def _body_edge_lengths(model, bodies=None) -> np.ndarray:
     any), or, for a model without springs (the ``"smoothed"`` rung), of the tet edges of its
     continuum element sets."""
     if model.topology is not None:
-        return (CollisionBodies.from_model(model) if bodies is None else bodies).mean_edge_lengths
+        # The tet bodies come first (CollisionBodies.from_model); bodies after them have no tet (a cloth or a
+        # string joined by volspring.structures.combine) and take the rule below.
+        meshed = (CollisionBodies.from_model(model) if bodies is None else bodies).mean_edge_lengths
+        if len(meshed) == model.body_count:
+            return meshed
+        return np.concatenate([meshed, _spring_edge_lengths(model)[len(meshed):]])
+    return _spring_edge_lengths(model)
+
+
+def _spring_edge_lengths(model) -> np.ndarray:
+    """(b,) float -- mean rest length of the springs that start in each body (see :func:`_body_edge_lengths`)."""
     if model.spring_count:
         edges = model.kinds == SPRING_KINDS.index("tet_edge")
         if not edges.any():
@@ -238,8 +248,13 @@ class ObstacleContactForce(_PenaltyResponse):
     model : Model -- one body or many (E and the edge length of each node's body)
     obstacles : sequence of HalfSpace or StaticTriangleMesh
     nodes : (k,) int, optional -- the model nodes that can touch the obstacles; default all
+    thickness : float -- contact layer over the obstacles' surfaces [m], >= 0: a node closer than this
+        to a surface is in contact, with depth ``thickness - distance`` (the half-thickness of a cloth,
+        the radius of a string or a hair, whose nodes have no volume of their own); 0 (default):
+        contact only inside
     stiffness, stiffness_factor, damping_ratio, damping, friction, friction_velocity -- as for
-        :class:`ContactForce`
+        :class:`ContactForce`; a model without a material (a cloth, a string: built from arrays)
+        needs ``stiffness``
 
     Examples
     --------
@@ -254,9 +269,11 @@ class ObstacleContactForce(_PenaltyResponse):
     [100.0, 0.0]
     """
 
-    def __init__(self, model, obstacles, *, nodes=None, stiffness=None, stiffness_factor=DEFAULT_STIFFNESS_FACTOR,
-                 damping_ratio=None, damping=None, friction=0.0, friction_velocity=DEFAULT_FRICTION_VELOCITY):
+    def __init__(self, model, obstacles, *, nodes=None, thickness=0.0, stiffness=None,
+                 stiffness_factor=DEFAULT_STIFFNESS_FACTOR, damping_ratio=None, damping=None, friction=0.0,
+                 friction_velocity=DEFAULT_FRICTION_VELOCITY):
         model = _as_model(model)
+        self.thickness = _positive(thickness, "thickness", allow_zero=True)
         E, length = _body_moduli(model)[model.node_body], _body_edge_lengths(model)[model.node_body]
         super().__init__(model, stiffness=stiffness, stiffness_factor=stiffness_factor, damping_ratio=damping_ratio,
                          damping=damping, friction=friction, friction_velocity=friction_velocity)
@@ -280,10 +297,10 @@ class ObstacleContactForce(_PenaltyResponse):
 
     def __repr__(self) -> str:
         return (f"ObstacleContactForce({len(self.obstacles)} obstacles, {len(self.nodes)} nodes, "
-                f"friction={self.friction:g})")
+                f"thickness={self.thickness:g}, friction={self.friction:g})")
 
     def _detect(self, x) -> PenaltyContacts:
-        hits = obstacle_contacts(self.obstacles, x[self.nodes])
+        hits = obstacle_contacts(self.obstacles, x[self.nodes], thickness=self.thickness)
         vertex = self.nodes[hits.vertex]
         stiffness, damping = self._coefficients(self._node_modulus[vertex], self._node_length[vertex],
                                                 self.model.masses[vertex])

@@ -100,23 +100,24 @@ class HalfSpace:
         """(n,) float -- height of each node above the plane [m] (negative below)."""
         return (x - self.point) @ self.normal
 
-    def contacts(self, points):
-        """Points below the plane, for penalty contact (``volspring.collision.ObstacleContactForce``).
+    def contacts(self, points, *, thickness=0.0):
+        """Points below the plane, or less than ``thickness`` above it, for penalty contact
+        (``volspring.collision.ObstacleContactForce``).
 
         Returns
         -------
-        vertex : (k,) int -- indices of the points below the plane
-        depth : (k,) float -- how far below [m]
+        vertex : (k,) int -- indices of the points below ``thickness`` above the plane
+        depth : (k,) float -- how far below that level [m]: ``thickness - height``
         direction : (k, 3) float -- the way out (the normal)
         closest : (k, 3) float -- nearest points on the plane [m]
         face : (k,) int -- -1 (a plane has no faces)
         """
         points = np.asarray(points, dtype=np.float64)
         height = self.signed_distances(points)
-        vertex = np.flatnonzero(height < 0)
-        depth = -height[vertex]
+        vertex = np.flatnonzero(height < thickness)
+        depth = thickness - height[vertex]
         direction = np.broadcast_to(self.normal, (len(vertex), 3)).copy()
-        closest = points[vertex] + depth[:, None] * self.normal
+        closest = points[vertex] - height[vertex, None] * self.normal
         return vertex, depth, direction, closest, np.full(len(vertex), -1, dtype=np.int64)
 
     def project(self, x, v, x_start, t, dt, free) -> None:
@@ -277,14 +278,19 @@ class StaticTriangleMesh:
         on_rim = (on_edge & rim_edge[edge]) | (on_corner & rim_vertex[corner])
         return normal / np.linalg.norm(normal, axis=1, keepdims=True), on_rim
 
-    def contacts(self, points):
+    def contacts(self, points, *, thickness=0.0):
         """Vertices in contact: ``(vertex (k,), depth (k,) [m], direction (k, 3), closest (k, 3) [m], face (k,))``.
 
-        ``direction`` is the unit vector from the vertex to its nearest surface point (for a vertex
-        exactly on the surface, the surface's pseudo-normal).
+        A vertex is in contact when it is inside (below, for an open mesh) or outside and closer than
+        ``thickness`` [m] to the surface; its depth is ``thickness + distance`` inside and
+        ``thickness - distance`` outside. ``direction`` is the unit vector that takes the vertex out of
+        that layer: towards its nearest surface point from inside, away from it from outside (for a
+        vertex exactly on the surface, the surface's pseudo-normal). On an open mesh a vertex outside
+        near the rim is pushed away from the rim (the rim is rounded by the thickness); one below it
+        is beside the sheet, not under it, and is left alone.
         """
         points = np.asarray(points, dtype=np.float64)
-        margin = 0.0 if self.closed else self.band
+        margin = (0.0 if self.closed else self.band) + thickness
         lo, hi = self.bounds[0] - margin, self.bounds[1] + margin
         near = np.flatnonzero(((points >= lo) & (points <= hi)).all(axis=1))
         face, closest, bary, distance = nearest_surface_points(points[near], self.vertices, self.faces, tree=self._tree)
@@ -294,10 +300,16 @@ class StaticTriangleMesh:
         inside = signed < 0
         if not self.closed:
             inside &= ~on_rim & (distance < self.band)
-        # The pseudo-normal sign is exact; |p - c| > 0 whenever signed < 0, so the division is safe.
-        keep = np.flatnonzero(inside)
-        direction = offset[keep] / distance[keep, None]
-        return near[keep], distance[keep], direction, closest[keep], face[keep]
+        outside = (signed >= 0) & (distance < thickness)
+        keep = np.flatnonzero(inside | outside)
+        sign = np.where(inside[keep], 1.0, -1.0)  # towards the surface from inside, away from it outside
+        # The pseudo-normal sign is exact; |p - c| > 0 whenever signed < 0, so only a vertex exactly on
+        # the surface (outside, distance 0) has no offset direction: it takes the pseudo-normal.
+        on_surface = distance[keep] == 0.0
+        direction = np.where(on_surface[:, None], normal[keep],
+                             sign[:, None] * offset[keep] / np.where(on_surface, 1.0, distance[keep])[:, None])
+        depth = thickness + sign * distance[keep]
+        return near[keep], depth, direction, closest[keep], face[keep]
 
 
 @dataclass(frozen=True, eq=False)
@@ -308,8 +320,10 @@ class ObstacleContacts:
     ----------
     vertex : (k,) int64 -- global node id
     obstacle : (k,) int64 -- index of the obstacle in the list given to :func:`obstacle_contacts`
-    depth : (k,) float -- distance to the obstacle's surface [m], > 0
-    direction : (k, 3) float -- unit direction that takes the vertex out (towards ``closest``)
+    depth : (k,) float -- depth in the contact layer [m], > 0: the distance to the surface inside, plus the
+        thickness; the thickness minus the distance outside
+    direction : (k, 3) float -- unit direction that takes the vertex out (towards ``closest`` from inside, away
+        from it outside)
     closest : (k, 3) float -- nearest surface point, a natural anchor for friction [m]
     face : (k,) int64 -- triangle of ``closest``; -1 for a half-space
     """
@@ -326,13 +340,15 @@ class ObstacleContacts:
         return len(self.vertex)
 
 
-def obstacle_contacts(obstacles, positions) -> ObstacleContacts:
-    """Every vertex inside any static obstacle.
+def obstacle_contacts(obstacles, positions, *, thickness=0.0) -> ObstacleContacts:
+    """Every vertex inside any static obstacle, or closer than ``thickness`` to its surface.
 
     Parameters
     ----------
     obstacles : sequence of HalfSpace or StaticTriangleMesh
     positions : (N, 3) float -- current node positions of all bodies, stacked [m]
+    thickness : float -- contact layer over each obstacle's surface [m], >= 0: the half-thickness of
+        a cloth or a string's radius (0: contact only inside)
 
     Returns
     -------
@@ -350,12 +366,15 @@ def obstacle_contacts(obstacles, positions) -> ObstacleContacts:
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim != 2 or positions.shape[1] != 3:
         raise ValueError(f"positions must have shape (N, 3), got {positions.shape}")
+    if not (np.isfinite(thickness) and thickness >= 0):
+        raise ValueError(f"thickness = {thickness} m is not finite and >= 0")
+    thickness = float(thickness)
     parts = []
     for index, obstacle in enumerate(obstacles):  # a loop over obstacles, not over vertices
         if not isinstance(obstacle, (HalfSpace, StaticTriangleMesh)):
             raise TypeError(f"obstacles[{index}] must be a HalfSpace or StaticTriangleMesh, "
                             f"got {type(obstacle).__name__}")
-        vertex, depth, direction, closest, face = obstacle.contacts(positions)
+        vertex, depth, direction, closest, face = obstacle.contacts(positions, thickness=thickness)
         parts.append((vertex, np.full(len(vertex), index, dtype=np.int64), depth, direction, closest, face))
     if not parts:
         parts = [(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 3)), np.zeros((0, 3)),
