@@ -67,3 +67,30 @@ def rewritten_archive(path, target, **changes):
             arrays[name] = value
     np.savez_compressed(target, **arrays)
     return target
+
+
+def dense_blocks(element_set, blocks, node_count):
+    """(3 n, 3 n) -- an element set's blocks (its block layout) summed into a dense matrix, by plain loops: the
+    independent reference the sparse assembly is checked against."""
+    A = np.zeros((3 * node_count, 3 * node_count))
+    layout, stencil = element_set.block_map, element_set.stencil
+    for q in range(len(layout.row)):
+        rows, cols = stencil[:, layout.row[q]], stencil[:, layout.column[q]]
+        for e in range(len(stencil)):
+            A[3 * rows[e]:3 * rows[e] + 3, 3 * cols[e]:3 * cols[e] + 3] += layout.sign[q] * blocks[e, layout.block[q]]
+    return A
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def load_example(name):
+    """The example script ``examples/NAME.py`` as a module (its main() not run)."""
+    import importlib.util
+    import sys
+
+    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module

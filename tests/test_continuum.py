@@ -7,6 +7,7 @@ exactly, so E and nu come out exact on any mesh) and against the FEM reference's
 
 import numpy as np
 import pytest
+from conftest import dense_blocks
 
 from meshing import TetMesh, structured_box
 from volspring import Material, Model, Scene
@@ -64,16 +65,6 @@ def _sets(mesh):
     }
 
 
-def _dense(element_set, blocks, n):
-    A = np.zeros((3 * n, 3 * n))
-    layout, stencil = element_set.block_map, element_set.stencil
-    for q in range(len(layout.row)):
-        rows, cols = stencil[:, layout.row[q]], stencil[:, layout.column[q]]
-        for e in range(len(stencil)):
-            A[3 * rows[e]:3 * rows[e] + 3, 3 * cols[e]:3 * cols[e] + 3] += layout.sign[q] * blocks[e, layout.block[q]]
-    return A
-
-
 # A deformation of 15% of the cell size at random: large strains, some tets near inversion.
 @pytest.mark.parametrize("name", ["corotated", "nodal", "nodal_regions", "volume_only", "clustered"])
 def test_forces_are_the_energy_gradient_and_blocks_its_hessian(cube, name):
@@ -100,7 +91,7 @@ def test_forces_are_the_energy_gradient_and_blocks_its_hessian(cube, name):
 def test_projected_blocks_are_symmetric_positive_semidefinite(cube, name):
     element_set = _sets(cube)[name]
     x = cube.points + 0.2 * np.random.default_rng(RNG_SEED + 1).standard_normal(cube.points.shape)
-    A = _dense(element_set, element_set.stiffness_blocks(x), cube.node_count)
+    A = dense_blocks(element_set, element_set.stiffness_blocks(x), cube.node_count)
     eigenvalues = np.linalg.eigvalsh(A)
     # Exact zero eigenvalues (rigid modes, twist directions clamped to 0) come out at round-off: 1e-12 relative.
     assert np.abs(A - A.T).max() <= 1e-12 * np.abs(A).max()

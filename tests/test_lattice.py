@@ -9,12 +9,10 @@
 - determinism, and the example runs and writes the anchored surface.
 """
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
 import trimesh
+from conftest import load_example
 
 from meshing import sphere, structured_box
 from meshing.lattice import anchor_lattice, box_lattice, voxelize
@@ -22,7 +20,6 @@ from volspring import Material
 from volspring.lattice import box_lattice_model, lattice_body, lattice_constants, lattice_model
 
 RUBBER = Material(E=1e5, nu=0.3, density=1000.0)
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "lattice_bunny.py"
 
 
 # ---------------------------------------------------------------------- volume and mass
@@ -215,9 +212,7 @@ def test_building_twice_gives_the_same_model():
 def test_example_writes_the_anchored_surface(tmp_path):
     from volspring.output.blender import read_pc2
 
-    spec = importlib.util.spec_from_file_location("lattice_bunny", EXAMPLE)
-    example = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(example)
+    example = load_example("lattice_bunny")
     assert example.main([str(tmp_path / "out"), "--quick"]) == 0
     quick = example.SETTINGS["quick"]
     frames = round(quick["duration"] / quick["frame_dt"]) + 1  # frame 0 plus one per frame_dt

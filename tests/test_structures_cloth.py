@@ -39,12 +39,10 @@ more than 300 at n = 40).
 from __future__ import annotations
 
 import functools
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_example
 from scipy.spatial import Delaunay
 
 from volspring import Drag, Gravity, Pins, Scene, SimulationDiverged, State
@@ -56,7 +54,6 @@ from volspring.springs import spring_strains
 from volspring.structures import cloth_grid, cloth_mesh, cloth_springs, cloth_strain_limit, sheet_grid
 
 RNG_SEED = 20240612
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SHEET = {"areal_density": 0.2, "membrane_stiffness": 100.0}
 HANGING = ((1, 0, 0), (0, 0, -1))  # width along x, height down -z: the top edge at z = 0
 #: The relaxation stops once the largest violation it meets in a sweep is below this [-] (1e-3 of tau = 0.1).
@@ -93,14 +90,6 @@ def _hang(mesh, n, tau):
     for _ in range(150):
         state = stepper.step(scene, state, dt)
     return model, state, float(-state.x[bottom, 2])
-
-
-def _load_example(name):
-    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
 
 
 def _membrane_energy_ratio(model, strain, normal_axis=1):
@@ -284,7 +273,7 @@ def test_implicit_euler_is_stable_far_above_the_explicit_limit():
 def test_example_writes_a_surface_for_paraview_and_blender(tmp_path):
     import meshio
 
-    example = _load_example("cloth")
+    example = load_example("cloth")
     assert example.main([str(tmp_path / "out"), "--quick"]) == 0
     quick = example.SETTINGS["quick"]
     frame_count = round(quick["duration"] / quick["frame_dt"]) + 1  # frame 0 plus one per frame_dt

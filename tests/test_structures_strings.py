@@ -13,12 +13,10 @@
 
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import dense_blocks, load_example
 from scipy.optimize import fsolve
 
 from volspring import Drag, Gravity, Pins, Scene, State
@@ -33,25 +31,6 @@ from volspring.statics import solve_static
 from volspring.structures import hair, strand_points, string
 
 RNG_SEED = 20240611
-EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
-
-
-def _load_example(name):
-    spec = importlib.util.spec_from_file_location(f"example_{name}", EXAMPLES / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-def _dense(element_set, blocks, n):
-    A = np.zeros((3 * n, 3 * n))
-    layout, stencil = element_set.block_map, element_set.stencil
-    for q in range(len(layout.row)):
-        rows, cols = stencil[:, layout.row[q]], stencil[:, layout.column[q]]
-        for e in range(len(stencil)):
-            A[3 * rows[e]:3 * rows[e] + 3, 3 * cols[e]:3 * cols[e] + 3] += layout.sign[q] * blocks[e, layout.block[q]]
-    return A
 
 
 def _energy_gradient(element_set, x, h=1e-6):
@@ -142,8 +121,8 @@ def test_projected_angle_blocks_are_symmetric_positive_semidefinite_and_exact_on
     rng = np.random.default_rng(RNG_SEED + 4)
     angles = _angle_sets(rng)["bent_rest"]
     x = rng.standard_normal((8, 3))
-    projected = np.linalg.eigvalsh(_dense(angles, angles.stiffness_blocks(x), 8))
-    exact = np.linalg.eigvalsh(_dense(angles, angles.stiffness_blocks(x, clamp_compression=False), 8))
+    projected = np.linalg.eigvalsh(dense_blocks(angles, angles.stiffness_blocks(x), 8))
+    exact = np.linalg.eigvalsh(dense_blocks(angles, angles.stiffness_blocks(x, clamp_compression=False), 8))
     # Zero eigenvalues (rigid modes, clamped directions) come out at round-off: 1e-12 relative.
     assert projected.min() >= -1e-12 * projected.max()
     assert exact.min() < -1e-3 * exact.max()  # a bent joint away from rest is indefinite: the projection acts
@@ -324,7 +303,7 @@ def test_implicit_euler_is_stable_far_above_the_explicit_limit_of_stiff_bending(
 @pytest.mark.parametrize("script, name", [("plucked_string", "string"), ("hair", "hair")])
 def test_example_scripts_write_line_series(tmp_path, script, name):
     # examples/plucked_string.py, not string.py: run as a script, that name would shadow the standard library's string.
-    example = _load_example(script)
+    example = load_example(script)
     assert example.main([str(tmp_path / "out"), "--quick"]) == 0
     frames = read_pvd(tmp_path / "out" / f"{name}_springs.pvd")
     quick = example.SETTINGS["quick"]

@@ -210,12 +210,7 @@ def hair(points, *, bending_stiffness, axial_stiffness, linear_density=None, mas
     >>> strand.node_count, [type(element_set).__name__ for element_set in strand.elements]
     (41, ['Springs', 'AngleSprings', 'DihedralSprings'])
     """
-    points = _real_array("points", points)
-    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 3:
-        raise ValueError(f"points have shape {points.shape}; expected (n, 3) with n >= 3 (a strand needs a joint)")
-    if not np.isfinite(points).all():
-        node = int(np.flatnonzero(~np.isfinite(points).all(axis=1))[0])
-        raise ValueError(f"points[{node}] = {points[node].tolist()} m is not finite")
+    points = _checked_points(points, " (a strand needs a joint)")
     n = len(points)
     edges = np.diff(points, axis=0)
     lengths = np.linalg.norm(edges, axis=1)
@@ -285,6 +280,18 @@ def _count(count) -> int:
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 2:
         raise ValueError(f"count = {count!r} nodes; expected an integer >= 2")
     return int(count)
+
+
+def _checked_points(points, why="") -> np.ndarray:
+    """(n, 3) float -- finite positions of at least three nodes [m]; a ValueError names the shape or the first
+    non-finite point."""
+    points = _real_array("points", points)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 3:
+        raise ValueError(f"points have shape {points.shape}; expected (n, 3) with n >= 3{why}")
+    if not np.isfinite(points).all():
+        node = int(np.flatnonzero(~np.isfinite(points).all(axis=1))[0])
+        raise ValueError(f"points[{node}] = {points[node].tolist()} m is not finite")
+    return points
 
 
 # ---------------------------------------------------------------------------- cloth
@@ -465,12 +472,7 @@ def cloth_mesh(points, triangles, *, areal_density=None, mass=None, membrane_sti
     >>> [int(cloth_springs(square, kind).sum()) for kind in ("structural", "bend")], square.masses.round(12).tolist()
     ([5, 1], [0.066666666667, 0.033333333333, 0.066666666667, 0.033333333333])
     """
-    points = _real_array("points", points)
-    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 3:
-        raise ValueError(f"points have shape {points.shape}; expected (n, 3) with n >= 3")
-    if not np.isfinite(points).all():
-        node = int(np.flatnonzero(~np.isfinite(points).all(axis=1))[0])
-        raise ValueError(f"points[{node}] = {points[node].tolist()} m is not finite")
+    points = _checked_points(points)
     triangles = np.asarray(triangles)
     if triangles.ndim != 2 or triangles.shape[1] != 3 or not len(triangles) or triangles.dtype.kind not in "iu":
         raise ValueError(f"triangles have shape {triangles.shape} and dtype {triangles.dtype}; expected (m, 3) "

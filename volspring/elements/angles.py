@@ -141,22 +141,8 @@ class AngleSprings(ElementSet):
 
     def __post_init__(self):
         node_count = int(self.node_count)
-        triples = _checked_triples(self.triples, node_count)
-        e = len(triples)
-        stiffness = per_item_array("stiffness", self.stiffness, e, allow_zero=True)
-        rest = _real_array("rest_angles", self.rest_angles)
-        try:
-            rest = np.broadcast_to(rest, (e,)).copy()
-        except ValueError:
-            raise ValueError(f"rest_angles has shape {rest.shape}; expected a number or shape ({e},)") from None
-        bad = ~np.isfinite(rest) | (rest < 0) | (rest > np.pi)
-        if bad.any():
-            first = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"rest_angles[{first}] = {rest[first]} rad is not in [0, pi] (pi is straight)")
-        object.__setattr__(self, "node_count", node_count)
-        for name, array in (("triples", triples), ("stiffness", stiffness), ("rest_angles", rest)):
-            array.setflags(write=False)
-            object.__setattr__(self, name, array)
+        _freeze_joints(self, "triples", _checked_triples(self.triples, node_count), (0.0, np.pi),
+                       "[0, pi] (pi is straight)")
 
     @classmethod
     def at_rest(cls, positions, triples, stiffness) -> "AngleSprings":
@@ -371,6 +357,26 @@ def _node_blocks(aa, ab, bb, *, scale=1.0) -> np.ndarray:
     return out.reshape(-1, 9, 3, 3)
 
 
+def _freeze_joints(joints, name, chains, bounds, interval) -> None:
+    """Check a joint set's stiffness and rest angles against its checked ``chains`` and store all three read-only
+    (``rest_angles`` must lie in ``bounds``, described as ``interval`` in the message)."""
+    e = len(chains)
+    stiffness = per_item_array("stiffness", joints.stiffness, e, allow_zero=True)
+    rest = _real_array("rest_angles", joints.rest_angles)
+    try:
+        rest = np.broadcast_to(rest, (e,)).copy()
+    except ValueError:
+        raise ValueError(f"rest_angles has shape {rest.shape}; expected a number or shape ({e},)") from None
+    bad = ~np.isfinite(rest) | (rest < bounds[0]) | (rest > bounds[1])
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"rest_angles[{first}] = {rest[first]} rad is not in {interval}")
+    object.__setattr__(joints, "node_count", int(joints.node_count))
+    for key, array in ((name, chains), ("stiffness", stiffness), ("rest_angles", rest)):
+        array.setflags(write=False)
+        object.__setattr__(joints, key, array)
+
+
 def _checked_triples(triples, node_count) -> np.ndarray:
     """(e, 3) int64 -- joints: integers in [0, node_count), three different nodes each."""
     return _checked_chains("triples", triples, node_count, 3)
@@ -446,22 +452,8 @@ class DihedralSprings(ElementSet):
 
     def __post_init__(self):
         node_count = int(self.node_count)
-        quads = _checked_chains("quads", self.quads, node_count, 4)
-        e = len(quads)
-        stiffness = per_item_array("stiffness", self.stiffness, e, allow_zero=True)
-        rest = _real_array("rest_angles", self.rest_angles)
-        try:
-            rest = np.broadcast_to(rest, (e,)).copy()
-        except ValueError:
-            raise ValueError(f"rest_angles has shape {rest.shape}; expected a number or shape ({e},)") from None
-        bad = ~np.isfinite(rest) | (np.abs(rest) > np.pi)
-        if bad.any():
-            first = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"rest_angles[{first}] = {rest[first]} rad is not in [-pi, pi]")
-        object.__setattr__(self, "node_count", node_count)
-        for name, array in (("quads", quads), ("stiffness", stiffness), ("rest_angles", rest)):
-            array.setflags(write=False)
-            object.__setattr__(self, name, array)
+        _freeze_joints(self, "quads", _checked_chains("quads", self.quads, node_count, 4), (-np.pi, np.pi),
+                       "[-pi, pi]")
 
     @classmethod
     def at_rest(cls, positions, quads, stiffness) -> "DihedralSprings":
