@@ -34,39 +34,6 @@ SETTINGS = {
 WIDTH, HEIGHT, AREAL_DENSITY, MEMBRANE, TAU = 1.5, 1.0, 0.15, 200.0, 0.1
 
 
-class TriangleSurface:
-    """The cloth's own nodes and triangles as a render surface (``deform`` and ``faces``, as BlenderWriter takes)."""
-
-    def __init__(self, triangles):
-        self.faces = np.asarray(triangles, dtype=np.int64)
-
-    def deform(self, x):
-        return np.asarray(x, dtype=np.float64)
-
-
-class SurfaceSeries:
-    """The triangle surface as a ParaView series: ``NAME_surface_0000.vtu`` ... listed in ``NAME_surface.pvd``."""
-
-    def __init__(self, directory, model, triangles, *, name):
-        from pathlib import Path
-
-        self.directory, self.model, self.triangles = Path(directory), model, np.asarray(triangles)
-        self.stem, self.entries = f"{name}_surface", []
-        self.directory.mkdir(parents=True, exist_ok=True)
-
-    def __call__(self, frame_index, state):
-        import meshio
-
-        from volspring.output import write_pvd
-
-        file = f"{self.stem}_{len(self.entries):04d}.vtu"
-        mesh = meshio.Mesh(state.x, [("triangle", self.triangles)],
-                           point_data={"displacement": state.x - self.model.rest_positions, "velocity": state.v})
-        meshio.write(self.directory / file, mesh, file_format="vtu")
-        self.entries.append((state.t, file))
-        write_pvd(self.directory / f"{self.stem}.pvd", self.entries)
-
-
 def build(*, nx, ny):
     """The flag hanging in the xz plane from its top edge at z = 0, its triangles, and its two top corners."""
     from volspring.structures import cloth_grid, sheet_grid
@@ -82,6 +49,7 @@ def run(output, *, quick=False):
     """Simulate and write the files; returns ``(model, SimulationResult)``."""
     from volspring import Gravity, Pins, Scene, Wind
     from volspring.output import BlenderWriter, ParaViewWriter
+    from volspring.output.blender import BoundarySurface
     from volspring.simulate import simulate
     from volspring.structures import cloth_strain_limit
 
@@ -91,8 +59,8 @@ def run(output, *, quick=False):
     wind = Wind(direction=(0.3, 1.0, 0.0), speed=3.0, rate=2.0, gusts=[(1.5, 1.0, 0.0)])
     scene = Scene(flag, forces=[Gravity(), wind], pins=Pins(corners),
                   constraints=[cloth_strain_limit(flag, TAU, iterations=30, tolerance=1e-3)])
-    writers = [SurfaceSeries(output, flag, triangles, name="cloth"), ParaViewWriter(output, flag, name="cloth"),
-               BlenderWriter(output, TriangleSurface(triangles), name="cloth")]
+    writers = [ParaViewWriter(output, flag, name="cloth", triangles=triangles),
+               BlenderWriter(output, BoundarySurface.from_triangles(triangles, flag.node_count), name="cloth")]
 
     def write(frame, state):
         for writer in writers:

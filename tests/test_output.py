@@ -338,3 +338,31 @@ def test_a_run_folder_notes_what_the_run_is_beside_its_files(tmp_path):
     assert manifest["model"] == {"rung": "smoothed", "alpha": 0.5} and manifest["status"] == "finished"
     with pytest.raises(RuntimeError, match="is finished: it cannot note 'model'"):
         run.note("model", {})
+
+
+def test_a_surface_of_the_models_own_nodes_is_one_more_series(tmp_path):
+    """A cloth (a model built from arrays) writes its triangles as NAME_surface.pvd, read back frame by frame,
+    resumes like the other series, and the same triangles go to Blender through BoundarySurface.from_triangles."""
+    from volspring.structures import cloth_grid, sheet_grid
+
+    _, triangles = sheet_grid(1.0, 1.0, 3, 2)
+    cloth = cloth_grid(1.0, 1.0, 3, 2, areal_density=0.2, membrane_stiffness=100.0)
+    states = [State(cloth.rest_positions + 0.01 * k, np.full((cloth.node_count, 3), float(k)), 0.1 * k)
+              for k in range(3)]
+    writer = ParaViewWriter(tmp_path, cloth, name="cloth", triangles=triangles)
+    for state in states[:2]:
+        writer.write(state)
+    resumed = ParaViewWriter(tmp_path, cloth, name="cloth", triangles=triangles, first_frame=2)
+    resumed.write(states[2])
+    frames = read_pvd(tmp_path / "cloth_surface.pvd")
+    assert [time for time, _ in frames] == [0.0, 0.1, 0.2]
+    for (_, file), state in zip(frames, states):
+        data = meshio.read(file)
+        assert np.array_equal(data.cells_dict["triangle"], triangles)
+        assert np.array_equal(data.points, state.x) and np.array_equal(data.point_data["velocity"], state.v)
+    with pytest.raises(ValueError, match="the model has 12 nodes"):
+        ParaViewWriter(tmp_path, cloth, name="bad", triangles=triangles + 1)
+    blender = BlenderWriter(tmp_path / "blender", BoundarySurface.from_triangles(triangles, cloth.node_count), name="c")
+    blender(0, states[1])
+    samples, _, _ = read_pc2(tmp_path / "blender" / "c.pc2")
+    assert np.allclose(samples[0], states[1].x, rtol=0, atol=1e-6)  # PC2 stores float32

@@ -82,12 +82,19 @@ class BoundarySurface:
         local[nodes] = np.arange(len(nodes))
         return cls(nodes, local[mesh.boundary_faces], node_count)
 
+    @classmethod
+    def from_triangles(cls, triangles, node_count) -> "BoundarySurface":
+        """A surface made of a model's own nodes, ``triangles`` (f, 3) indexing them (a cloth's)."""
+        triangles = np.asarray(triangles, dtype=np.int64)
+        nodes = np.unique(triangles)
+        return cls(nodes, np.searchsorted(nodes, triangles), int(node_count))
+
     @property
     def point_count(self) -> int:
         return len(self.nodes)
 
     def deform(self, x) -> np.ndarray:
-        """(p, 3) float -- the boundary vertices at tet node positions ``x`` (n, 3) [m]."""
+        """(p, 3) float -- the surface vertices at node positions ``x`` (n, 3) [m]."""
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (self.node_count, 3):
             raise ValueError(f"x must have shape ({self.node_count}, 3), got {x.shape}")

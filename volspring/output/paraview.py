@@ -111,6 +111,8 @@ class ParaViewWriter:
         afresh. Raises if the existing PVD lists fewer frames.
     record : callable, optional -- called as ``record(*paths)`` with the files of each frame (and
         the PVD files) before any of them is written, such as :meth:`RunFolder.record`; default None
+    triangles : (f, 3) int, optional -- a surface made of the model's own nodes (a cloth's triangles,
+        :func:`volspring.structures.sheet_grid`): written as one more series, ``NAME_surface.pvd``
 
     Notes
     -----
@@ -132,7 +134,7 @@ class ParaViewWriter:
     (1, 'frame.pvd')
     """
 
-    def __init__(self, directory, model, *, name="frame", springs=None, first_frame=0, record=None):
+    def __init__(self, directory, model, *, name="frame", springs=None, first_frame=0, record=None, triangles=None):
         self.directory = Path(directory)
         self.model = model
         self.name = str(name)
@@ -143,14 +145,24 @@ class ParaViewWriter:
         if self.springs and not model.spring_count:
             raise ValueError(f"springs=True, but the model has no springs (its rung is {model.rung!r}): the spring "
                              "series would be empty; leave springs= out to write the tet series only")
-        if self.mesh is None and not self.springs:
+        self.triangles = None
+        if triangles is not None:
+            triangles = np.asarray(triangles)
+            if triangles.ndim != 2 or triangles.shape[1] != 3 or triangles.dtype.kind not in "iu":
+                raise ValueError(f"triangles have shape {triangles.shape} and dtype {triangles.dtype}; expected (f, 3) "
+                                 "integer node indices")
+            if triangles.size and (triangles.min() < 0 or triangles.max() >= model.node_count):
+                raise ValueError(f"triangles index nodes {triangles.min()} to {triangles.max()}; the model has "
+                                 f"{model.node_count} nodes")
+            self.triangles = triangles.astype(np.int64)
+        if self.mesh is None and not self.springs and self.triangles is None:
             raise ValueError("the model has no tet mesh (built from arrays) and springs=False: nothing to write")
         if self.mesh is not None:
             self._rest_volumes = self.mesh.tet_volumes
             self._rest_inverses = _rest_inverses(self.mesh)
         self._record = record
         self.directory.mkdir(parents=True, exist_ok=True)
-        self._entries = {"body": [], "springs": []}
+        self._entries = {"body": [], "springs": [], "surface": []}
         first_frame = int(first_frame)
         if first_frame < 0:
             raise ValueError(f"first_frame = {first_frame} is not >= 0")
@@ -179,10 +191,11 @@ class ParaViewWriter:
         return self._pvd("springs") if self.springs else None
 
     def _series(self):
-        return (["body"] if self.mesh is not None else []) + (["springs"] if self.springs else [])
+        return ((["body"] if self.mesh is not None else []) + (["springs"] if self.springs else [])
+                + (["surface"] if self.triangles is not None else []))
 
     def _stem(self, series):
-        return self.name if series == "body" else f"{self.name}_springs"
+        return self.name if series == "body" else f"{self.name}_{series}"
 
     def _pvd(self, series) -> Path:
         return self.directory / f"{self._stem(series)}.pvd"
@@ -263,6 +276,9 @@ class ParaViewWriter:
                 "springs", x, [("line", self.model.springs)],
                 point_data={"displacement": displacement, "velocity": v},
                 cell_data={"strain": [strain], "kind": [self.model.kinds.astype(np.int32)]})
+        if self.triangles is not None:
+            files["surface"] = self._write_vtu("surface", x, [("triangle", self.triangles)],
+                                               point_data={"displacement": displacement, "velocity": v}, cell_data={})
 
     def _write_vtu(self, series, points, cells, *, point_data, cell_data) -> Path:
         import meshio
