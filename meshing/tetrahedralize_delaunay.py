@@ -15,6 +15,9 @@ The enclosing band (default): the facets of a curved surface are chords that cut
 would lie mostly outside tets whose boundary is the facets. First, :func:`_enclosing_offsets` moves every
 vertex outward by 1.5 x the sag of its facets (and of the flipped facet pairs Delaunay may produce instead),
 so the tets' boundary is a thin sheet above the smooth surface; flat facets and creases stay where they are.
+Where a vertex's triangles fan out too widely for one sag-weighted direction (the folds of a coarse scan), it takes
+the shortest move that lifts every one of its triangles' planes by its sag instead (:func:`_least_lift`), so that
+no fan folds over the vertex's old position.
 The sheet's volume goes as ``(h / rho)^2``: measured +1 to +2% of the body at 4-6 edges per radius.
 """
 
@@ -196,6 +199,26 @@ def _enclosing_offsets(surface, feature_angle=40.0):
     facing = np.maximum(np.einsum("cj,cj->c", triangle_normals[corner_triangle], direction[corner_vertex]), 0.5)
     distance = np.zeros(len(vertices))
     np.maximum.at(distance, corner_vertex, sag[corner_triangle] / facing)
+    offsets = distance[:, None] * direction
+    # Where a vertex's triangles fan out by more than 60 deg from that direction (the folds of a coarse scan),
+    # the facing floor leaves some triangle's plane short of its sag, or even lowered: the moved fan then folds
+    # over the vertex's own old position, which ends up outside the offset surface. There, take the shortest
+    # move that lifts every plane by its sag.
+    lifted = np.einsum("cj,cj->c", triangle_normals[corner_triangle], offsets[corner_vertex])
+    short = np.unique(corner_vertex[lifted < sag[corner_triangle] * (1 - 1e-9)])
+    for vertex in short:
+        at = corner_vertex == vertex
+        lift = _least_lift(triangle_normals[corner_triangle[at]], sag[corner_triangle[at]])
+        if lift is None:  # the flipped pairs' planes and the facets' face all ways: lift the facets only
+            at &= corner_triangle < len(faces)
+            lift = _least_lift(triangle_normals[corner_triangle[at]], sag[corner_triangle[at]])
+        if lift is not None:
+            offsets[vertex] = lift
+    if len(short):
+        logger.info("delaunay: enclosing band: %d vertex offset(s) re-solved to lift each of their triangles "
+                    "by its sag (fans wider than the facing floor)", len(short))
+    distance = np.linalg.norm(offsets, axis=1)
+    direction = _unit(offsets)
     shortest = np.full(len(vertices), np.inf)
     np.minimum.at(shortest, surface.edges_unique.ravel(), np.repeat(surface.edges_unique_length, 2))
     capped = distance > _BAND_CAP * shortest
@@ -209,6 +232,31 @@ def _enclosing_offsets(surface, feature_angle=40.0):
         logger.warning("delaunay: enclosing band: %d face(s) would turn over; their vertices stay put", turned.sum())
         offsets[np.unique(faces[turned])] = 0.0
     return offsets
+
+
+def _least_lift(normals, heights):
+    """(3,) float -- the shortest ``d`` with ``normals @ d >= heights`` (k unit normals, k heights >= 0): the
+    minimum-norm point of an intersection of half-spaces, found among the solutions with 1 to 3 active planes
+    (``d = N_A^T lambda``, ``lambda >= 0``). None if no such ``d`` exists (normals facing all ways)."""
+    from itertools import combinations
+
+    best, best_norm = None, np.inf
+    if not (heights > 0).any():
+        return np.zeros(3)
+    for count in (1, 2, 3):
+        for active in combinations(range(len(normals)), count):
+            active = list(active)
+            gram = normals[active] @ normals[active].T
+            if abs(np.linalg.det(gram)) < 1e-12:
+                continue
+            weights = np.linalg.solve(gram, heights[active])
+            if (weights < 0).any():
+                continue
+            d = weights @ normals[active]
+            norm = np.linalg.norm(d)
+            if norm < best_norm and (normals @ d >= heights * (1 - 1e-9) - 1e-15).all():
+                best, best_norm = d, norm
+    return best
 
 
 def _unit(vectors):

@@ -94,3 +94,14 @@ def load_example(name):
     sys.modules[spec.name] = module
     spec.loader.exec_module(module)
     return module
+
+
+def energy_gradient(element_set, x, h=1e-6):
+    """(n, 3) -- central differences of an element set's energy at x: the reference its forces are checked against."""
+    gradient = np.zeros_like(x)
+    for i in range(len(x)):
+        for c in range(3):
+            step = np.zeros_like(x)
+            step[i, c] = h
+            gradient[i, c] = (element_set.energy(x + step) - element_set.energy(x - step)) / (2 * h)
+    return gradient

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import dense_blocks, load_example
+from conftest import dense_blocks, energy_gradient, load_example
 from scipy.optimize import fsolve
 
 from volspring import Drag, Gravity, Pins, Scene, State
@@ -32,15 +32,6 @@ from volspring.structures import hair, strand_points, string
 
 RNG_SEED = 20240611
 
-
-def _energy_gradient(element_set, x, h=1e-6):
-    gradient = np.zeros_like(x)
-    for i in range(len(x)):
-        for c in range(3):
-            step = np.zeros_like(x)
-            step[i, c] = h
-            gradient[i, c] = (element_set.energy(x + step) - element_set.energy(x - step)) / (2 * h)
-    return gradient
 
 
 def _angle_sets(rng):
@@ -58,7 +49,7 @@ def test_angle_forces_are_the_energy_gradient_and_blocks_its_hessian(name):
     x = rng.standard_normal((8, 3))
     forces = angles.forces(x)
     # Central differences at h = 1e-6 on O(1) energies: truncation h^2 ~ 1e-12, round-off 1e-16 / h ~ 1e-10.
-    assert np.abs(forces + _energy_gradient(angles, x)).max() <= 1e-8 * np.abs(forces).max()
+    assert np.abs(forces + energy_gradient(angles, x)).max() <= 1e-8 * np.abs(forces).max()
     u, h = rng.standard_normal(x.shape), 1e-6
     exact = _block_product(angles, angles.stiffness_blocks(x, clamp_compression=False), u)
     differenced = -(angles.forces(x + h * u) - angles.forces(x - h * u)) / (2 * h)
@@ -89,7 +80,7 @@ def test_dihedral_forces_are_the_gradient_and_gauss_newton_is_the_hessian_at_res
     twisted = DihedralSprings(7, quads, rng.uniform(0.5, 2.0, 3), rng.uniform(-3.0, 3.0, 3))
     forces = twisted.forces(x)
     # Same differencing budget as the angle springs.
-    assert np.abs(forces + _energy_gradient(twisted, x)).max() <= 1e-8 * np.abs(forces).max()
+    assert np.abs(forces + energy_gradient(twisted, x)).max() <= 1e-8 * np.abs(forces).max()
     at_rest = DihedralSprings.at_rest(x, quads, 1.0)
     u, h = rng.standard_normal(x.shape), 1e-6
     exact = _block_product(at_rest, at_rest.stiffness_blocks(x), u)
