@@ -69,10 +69,13 @@ everything else (integrators, supports, collisions, output); it differs only in 
     mesh (the calibration before, one sparse LU: 0.7-1.3 s and 20-100 s).
 ``"smoothed"``
     The node-based selective smoothed element (alpha-FEM / NS-FEM with nodal volume):
-    :class:`~volspring.elements.CorotatedTets` with shear (1 - alpha) mu and
-    :class:`~volspring.elements.NodalStrain` with shear alpha mu and bulk lambda, mu and lambda
-    straight from E and nu, no calibration. It passes the patch test (exact E and nu on any mesh)
-    and does not lock; its stiffness couples each node's 2-ring.
+    :class:`~volspring.elements.CorotatedTets` with shear (1 - alpha) mu, a
+    :class:`~volspring.elements.NodalStrain` with shear alpha mu on node domains, and one with bulk
+    lambda on pairs of nodes (:func:`~volspring.elements.tet_kinematics.pair_nodes`: one volume
+    constraint per node locks partially on coarse meshes whose nodes are mostly on the surface,
+    ``benchmarks/study_locking.py``), mu and lambda straight from E and nu, no calibration. It passes
+    the patch test (exact E and nu on any mesh); its stiffness couples each node's 2-ring (the
+    implicit step applies it as a product, :mod:`volspring.integrators.implicit`).
 
 Materials per region: a model takes one material for the whole mesh, or a region tag per tet
 (``regions``, e.g. gmsh physical groups, :func:`meshing.mesh_io.read_tet_regions`) and a
