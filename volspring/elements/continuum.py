@@ -6,15 +6,20 @@ Two sets build the upper rungs of the model ladder (:mod:`volspring.ladder`):
     Per tet, ``V_t mu_t |F_t - R_t|^2``: linear elasticity's shear energy ``mu |eps|^2`` at small
     strain, rotation-invariant at any strain (see :mod:`volspring.elements.tet_kinematics`).
 :class:`NodalStrain`
-    Per smoothing domain d (a node, and the tets of one region around it):
+    Per smoothing domain d (a node, or a cluster of nodes with ``clusters=``, and the tets of one
+    region around it):
     ``V_d mu_d |Fbar_d - R_d|^2 + (kappa_d / 2) V_d (J_d - 1)^2``, Fbar_d the volume-weighted mean
     of the tets' F, J_d = v_d / V_d the domain's volume ratio (so the volume terms of all domains
     measure exactly the body's volume). With mu_d = 0 it is a pure nodal volume term.
 
 The node-based selective smoothed element (alpha-FEM, Liu, Nguyen-Thoi, Lam 2008; NS-FEM, Liu et
 al. 2009; the volumetric part on nodal volumes as in Bonet & Burton 1998) is
-``CorotatedTets(mu (1 - a)) + NodalStrain(mu a, lambda)``; springs plus a volume term are
+``CorotatedTets(mu (1 - a)) + NodalStrain(mu a, 0) + NodalStrain(0, lambda, clusters=pairs)`` (the volume
+on pairs of nodes, like F-bar patches, against partial locking); springs plus a volume term are
 ``Springs + NodalStrain(0, kappa)``.
+
+Both sets are matrix-free in the implicit step (:attr:`ElementSet.matrix_free`): CG applies their stiffness
+as a product and the preconditioner is built from per-tet stand-in blocks on the 1-ring.
 
 Forces are the exact gradient of the energy. :meth:`stiffness_blocks` is its exact Hessian with
 ``clamp_compression=False`` and a positive semi-definite approximation otherwise: the twist
