@@ -15,6 +15,9 @@ bodies of one model (:meth:`volspring.Model.from_bodies`) with a frictional
   exact tet-tet narrow phase that ``ContactForce(edges=True)`` adds to every detection (it finds bodies
   crossing with no vertex inside the other), also as a ratio to ``detect``; ``pairs`` how many tet pairs
   intersect;
+- ``edges``: what edge contacts need per detection, boundary tets only:
+  ``crossing_tet_pairs(..., boundary=True)`` then :func:`~volspring.collision.tet_tet.edge_crossing_contacts`
+  (the same contacts as from all pairs), also as a ratio to ``detect``;
 - ``SpMV``: one product with the 3N x 3N spring-stiffness pattern of the same N nodes, measured in the
   same run as this machine's yardstick, and the step (force + jacobian) in units of it.
 
@@ -38,7 +41,7 @@ from volspring import Material, Model
 from volspring.assembly import stiffness_matrix
 from volspring.bodies import Body
 from volspring.collision import ContactForce, consistent_penetration_depths, detect_collisions
-from volspring.collision.tet_tet import crossing_tet_pairs
+from volspring.collision.tet_tet import crossing_tet_pairs, edge_crossing_contacts
 
 PUBLISHED_DETECTION_MS = {1_000: 4.3, 10_000: 30.4, 20_000: 70.0, 50_000: 172.5}
 
@@ -71,7 +74,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     print(f"{'tets':>7} {'nodes':>7} {'contacts':>8} {'detect ms':>9} {'paper ms':>8} {'depth ms':>8} "
           f"{'force ms':>8} {'jacobian ms':>11} {'us/contact':>10} {'SpMV ms':>8} {'step/SpMV':>9} "
-          f"{'pairs':>7} {'tet-tet ms':>10} {'tet-tet/detect':>14}")
+          f"{'pairs':>7} {'tet-tet ms':>10} {'tet-tet/detect':>14} {'edges ms':>8} {'edges/detect':>12}")
     rng = np.random.default_rng(0)
     for size in args.sizes:
         model, contact = contact_scene(size)
@@ -91,6 +94,8 @@ def main(argv=None) -> int:
         forces, _ = best_time(force, args.repeat)
         jacobian, _ = best_time(lambda: contact.jacobian(model, x, v, 0.0), args.repeat)
         tet_tet, pairs = best_time(lambda: crossing_tet_pairs(bodies, x), args.repeat)
+        edges, _ = best_time(lambda: edge_crossing_contacts(bodies, x, crossing_tet_pairs(bodies, x, boundary=True),
+                                                            colliding=hits), args.repeat)
         matrix, vector = stiffness_matrix(model), np.ones(3 * model.node_count)
         spmv, _ = best_time(lambda: matrix @ vector, 20 * args.repeat)
         nearest = min(PUBLISHED_DETECTION_MS, key=lambda t: abs(np.log(t / bodies.tet_count)))
@@ -99,7 +104,8 @@ def main(argv=None) -> int:
         print(f"{bodies.tet_count:>7} {bodies.node_count:>7} {found.count:>8} {1e3 * detect:>9.2f} {paper:>8.1f} "
               f"{1e3 * depth:>8.2f} {1e3 * forces:>8.2f} {1e3 * jacobian:>11.2f} "
               f"{1e6 * step / max(found.count, 1):>10.1f} {1e3 * spmv:>8.3f} {step / spmv:>9.0f} "
-              f"{pairs.count:>7} {1e3 * tet_tet:>10.2f} {tet_tet / detect:>14.1f}")
+              f"{pairs.count:>7} {1e3 * tet_tet:>10.2f} {tet_tet / detect:>14.1f} "
+              f"{1e3 * edges:>8.2f} {edges / detect:>12.1f}")
     print("force = detection + depths + penalty/damping/friction; step = force + jacobian")
     return 0
 

@@ -310,3 +310,37 @@ def test_crossing_slabs_are_pushed_apart_by_implicit_euler():
     # Equal and opposite forces: momentum stays at round-off of the largest momentum reached.
     momentum = linear_momentum(model, state)
     assert np.abs(momentum).max() <= 1e-9 * (model.masses[:, None] * np.abs(state.v)).sum()
+
+
+def contact_fields_equal(first, second):
+    return all(np.array_equal(getattr(first, name), getattr(second, name)) for name in first.__dataclass_fields__)
+
+
+@pytest.mark.parametrize("scene", ["slabs", "random0", "random1"])
+def test_boundary_broad_phase_gives_the_same_edge_contacts_as_all_pairs(scene, monkeypatch):
+    """``crossing_tet_pairs(boundary=True)`` keeps only pairs that can hold a boundary edge through a boundary
+    face: a subset of all intersecting pairs, with the same edge contacts (with and without ``colliding``,
+    and on both broad phases: each body against the later ones, and all against all)."""
+    from test_collision_detection import random_scene
+    from volspring.collision import tet_tet
+    from volspring.collision.tet_tet import crossing_tet_pairs, edge_crossing_contacts
+
+    if scene == "slabs":
+        bodies = CollisionBodies(crossing_slabs())
+        x = bodies.rest_positions
+    else:
+        bodies, x = random_scene(int(scene[-1]))
+    hits = detect_collisions(bodies, x)
+    every = crossing_tet_pairs(bodies, x)
+    boundary = crossing_tet_pairs(bodies, x, boundary=True)
+    monkeypatch.setattr(tet_tet, "_ONE_WAY_BODIES", 0)  # the all-against-all hash
+    assert contact_fields_equal(every, crossing_tet_pairs(bodies, x))
+    assert contact_fields_equal(boundary, crossing_tet_pairs(bodies, x, boundary=True))
+    pairs = set(zip(every.tet_a.tolist(), every.tet_b.tolist()))
+    assert set(zip(boundary.tet_a.tolist(), boundary.tet_b.tolist())) <= pairs
+    for colliding in (None, hits):
+        expected = edge_crossing_contacts(bodies, x, every, colliding=colliding)
+        assert expected.count > 0
+        assert contact_fields_equal(expected, edge_crossing_contacts(bodies, x, boundary, colliding=colliding))
+    if scene != "slabs":
+        assert boundary.count < every.count and hits.count > 0  # not vacuous: interior pairs were left out
