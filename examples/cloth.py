@@ -67,7 +67,7 @@ def run(output, *, quick=False):
             writer(frame, state)
 
     result = simulate(scene, "implicit_euler", duration=settings["duration"], dt=settings["dt"],
-                      frame_dt=settings["frame_dt"], callback=write, guard="off")
+                      frame_dt=settings["frame_dt"], callback=write)
     return flag, result
 
 

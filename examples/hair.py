@@ -93,7 +93,7 @@ def run(output, *, quick=False):
         blender(frame, state)
 
     result = simulate(scene, "implicit_euler", duration=settings["duration"], dt=settings["dt"],
-                      frame_dt=settings["frame_dt"], callback=write, guard="off")
+                      frame_dt=settings["frame_dt"], callback=write)
     return model, result
 
 

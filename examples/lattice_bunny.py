@@ -55,7 +55,7 @@ def run(output, *, quick=False):
         lattice_writer(frame, state)
 
     result = simulate(scene, "implicit_euler", duration=settings["duration"], dt=settings["dt"],
-                      frame_dt=settings["frame_dt"], callback=write, guard="off")
+                      frame_dt=settings["frame_dt"], callback=write)
     return body, result
 
 

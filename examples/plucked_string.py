@@ -59,7 +59,7 @@ def run(output, *, quick=False, length=1.0, density=0.01, tension=10.0, pluck=0.
         blender(frame, state)
 
     result = simulate(scene, "implicit_euler", duration=settings["duration"], dt=settings["dt"],
-                      frame_dt=settings["frame_dt"], callback=write, state=scene.initial_state(x=x), guard="off")
+                      frame_dt=settings["frame_dt"], callback=write, state=scene.initial_state(x=x))
     return model, result, np.sqrt(tension / density) / (2 * length)
 
 
