@@ -35,12 +35,15 @@ class SolverCache:
     pattern : BlockPattern or None -- of the last scene stepped
     record : tuple or None -- (pattern, step, t, dt, x, v) the current hierarchy was built from
     matrix_free : bool -- patterns apply the sets that offer it as products (:class:`BlockPattern`)
+    stand_in : sparse matrix or None -- the preconditioning matrix of the last build when sets are applied as
+        products (their stand-in blocks; rebuilt with the hierarchy, not pickled)
     """
 
     solver: object
     pattern: BlockPattern | None = None
     record: tuple | None = None
     matrix_free: bool = False
+    stand_in: object = None
 
     def pattern_for(self, scene) -> BlockPattern:
         """The block pattern of ``scene``'s model and free nodes: kept while they are the same, else rebuilt
@@ -48,7 +51,7 @@ class SolverCache:
         cached = self.pattern
         if cached is None or cached.model is not scene.model or not np.array_equal(cached.free, scene.free):
             self.pattern = BlockPattern(scene.model, scene.free, matrix_free=self.matrix_free)
-            self.record = None
+            self.record = self.stand_in = None
         return self.pattern
 
     def built(self, pattern, step, t, dt, x, v) -> None:
@@ -67,4 +70,4 @@ class SolverCache:
         solver = copy.copy(self.solver)
         if getattr(solver, "hierarchy", None) is not None:
             solver.hierarchy = None
-        return {"solver": solver, "pattern": None, "record": None, "matrix_free": self.matrix_free}
+        return {"solver": solver, "pattern": None, "record": None, "matrix_free": self.matrix_free, "stand_in": None}

@@ -123,13 +123,15 @@ class _System:
         return b + self.held_rhs
 
     @cached_property
+    def stand_in(self) -> sp.bsr_matrix:
+        """The matrix, with the stand-in blocks of the sets applied as products (what preconditioning sees)."""
+        return self.matrix if self.preconditioner_matrix is None else self.preconditioner_matrix()
+
+    @cached_property
     def whole(self) -> sp.bsr_matrix:
         """The matrix with the extra term added, BSR with 3x3 blocks (what the AMG hierarchy is given);
         with sets applied as products, their stand-in blocks instead of them."""
-        matrix = self.matrix if self.preconditioner_matrix is None else self.preconditioner_matrix()
-        if self.extra is None:
-            return matrix
-        return sp.bsr_matrix(matrix + self.extra, blocksize=(3, 3))
+        return self.stand_in if self.extra is None else sp.bsr_matrix(self.stand_in + self.extra, blocksize=(3, 3))
 
     @property
     def products(self):
@@ -319,6 +321,9 @@ class ImplicitEuler(Integrator):
         # the hierarchy too, so that the preconditioner sees the contact stiffness CG iterates on.
         seconds = cache.solver.build(system.whole, rigid_body_modes(x[pattern.free_nodes]))
         cache.built(pattern, step, t, dt, x, v)
+        # The stand-in blocks of sets applied as products cost a linearisation of their own: kept from the build
+        # for the contact refreshes of the steps that reuse this hierarchy (_solve).
+        cache.stand_in = system.stand_in if system.operator is not None else None
         return seconds
 
     # ------------------------------------------------------------------ the step
@@ -416,6 +421,10 @@ class ImplicitEuler(Integrator):
     def _solve(self, cache, system, b, warm):
         if system.extra is not None and self.method == "amg":
             # Contact changes from step to step: the fine level of the kept hierarchy gets the current
-            # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay.
-            cache.solver.refresh(system.whole)
+            # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay. With sets
+            # applied as products, their stand-in blocks are those of the hierarchy's build.
+            if system.operator is not None and cache.stand_in is not None:
+                cache.solver.refresh(sp.bsr_matrix(cache.stand_in + system.extra, blocksize=(3, 3)))
+            else:
+                cache.solver.refresh(system.whole)
         return cache.solver.solve(system.matrix, b, x0=warm, extra=system.products)
