@@ -330,16 +330,18 @@ class NodalStrain(_TetContinuum):
         return dots[:, None, None] * np.eye(3)
 
     # ------------------------------------------------------------------ kinematics
-    def _state(self, x, project):
-        """Everything forces and blocks need at x."""
-        F = self.kinematics.deformation(x)
-        V = self.kinematics.volumes
-        cof = _cofactor(F)
-        det = np.einsum("tij,tij->t", cof, F) / 3.0
-        state = {"F": F, "cof": cof, "det": det}
-        current = np.bincount(self.domains.corner_domain.ravel(), weights=np.repeat(V * det / 4.0, 4),
-                              minlength=self.domains.domain_count)
-        state["J"] = current / self.domains.volumes
+    def _state(self, x, project, *, volume=None):
+        """Everything forces and blocks need at x: the volume kinematics when the set has a volume term (or
+        ``volume`` asks for them), the smoothed rotation when it has shear."""
+        state = {}
+        if self.bulk.any() if volume is None else volume:
+            F = self.kinematics.deformation(x)
+            cof = _cofactor(F)
+            det = np.einsum("tij,tij->t", cof, F) / 3.0
+            current = np.bincount(self.domains.corner_domain.ravel(),
+                                  weights=np.repeat(self.kinematics.volumes * det / 4.0, 4),
+                                  minlength=self.domains.domain_count)
+            state.update(F=F, cof=cof, det=det, J=current / self.domains.volumes)
         if self.shear.any():
             psi, P, twists, coefficients = corotational(self.domains.averaged(x), project=project)
             state.update(psi=psi, P=P, twists=twists, coefficients=coefficients)
@@ -348,7 +350,7 @@ class NodalStrain(_TetContinuum):
     def energy(self, x) -> float:
         state = self._state(np.asarray(x, dtype=np.float64), True)
         V = self.domains.volumes
-        total = 0.5 * float((self.bulk * V) @ (state["J"] - 1.0) ** 2)
+        total = 0.5 * float((self.bulk * V) @ (state["J"] - 1.0) ** 2) if "J" in state else 0.0
         if "psi" in state:
             total += float((self.shear * V) @ state["psi"])
         return total
@@ -405,9 +407,10 @@ class NodalStrain(_TetContinuum):
     def _blocks(self, state, exact):
         first, second = self.domains.pairs
         V = self.domains.volumes
-        w = self._ring_volume_gradients(state)
-        w = w * np.sqrt(self.bulk / V)[self.domains.ring_domain][:, None]
-        blocks = w[first][:, :, None] * w[second][:, None, :]
+        blocks = np.zeros((len(first), 3, 3))
+        if "J" in state:
+            w = self._ring_volume_gradients(state) * np.sqrt(self.bulk / V)[self.domains.ring_domain][:, None]
+            blocks += w[first][:, :, None] * w[second][:, None, :]
         if "P" in state:
             # Per ring entry, the twist rows weighted by sqrt(2 mu_d V_d); the constant part is cached.
             entry_domain = self.domains.ring_domain
@@ -416,7 +419,7 @@ class NodalStrain(_TetContinuum):
                                            self.domains.ring_gradient)
             blocks -= np.matmul(np.swapaxes(root * scaled, 1, 2)[first], (root * plain)[second])
             blocks += self._identity_blocks
-        if exact:
+        if exact and "J" in state:
             blocks += self._volume_curvature(state)
         return blocks[:, None]
 
@@ -523,7 +526,7 @@ class NodalStrain(_TetContinuum):
 
     def volume_ratios(self, x) -> np.ndarray:
         """(d,) float -- J_d = v_d / V_d of every smoothing domain at positions x."""
-        return self._state(np.asarray(x, dtype=np.float64), True)["J"]
+        return self._state(np.asarray(x, dtype=np.float64), True, volume=True)["J"]
 
     def __repr__(self) -> str:
         return (f"NodalStrain({self.domains.domain_count} domains, {self.element_count} ring pairs, "
