@@ -167,9 +167,9 @@ def test_the_band_is_deterministic():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="measured 99.58% inside (134 of 32002 outside, a third of them next to "
-                   "the OBJ's near-folded edges of 120-178 deg) at +4.2% volume: the sag model misses the PN "
-                   "surface's bulge at folds; open")
+@pytest.mark.xfail(strict=True, reason="measured 99.58% inside (134 of 32002 outside; before the fold repair 140, "
+                   "a third of those next to the OBJ's near-folded edges of 120-178 deg) at +4.2% volume: the sag "
+                   "model misses the PN surface's bulge at folds; open")
 def test_a_finer_bunny_lies_inside_the_tets(bunny):
     coarse, fine = finer_bunny(bunny)
     # The bunny is a smooth scan: no edge is a crease (feature_angle 180), whatever its facets' angles.
