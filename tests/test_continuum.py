@@ -62,11 +62,12 @@ def _sets(mesh):
                                      regions=regions),
         "volume_only": NodalStrain(mesh.points, mesh.tets, 0.0, 3.0),
         "clustered": NodalStrain(mesh.points, mesh.tets, 0.6, 2.0, clusters=pair_nodes(mesh.points, mesh.tets)),
+        "held_pairs": NodalStrain(mesh.points, mesh.tets, 0.6, 2.0, clusters="pairs", held=mesh.points[:, 0] < 0.3),
     }
 
 
 # A deformation of 15% of the cell size at random: large strains, some tets near inversion.
-@pytest.mark.parametrize("name", ["corotated", "nodal", "nodal_regions", "volume_only", "clustered"])
+@pytest.mark.parametrize("name", ["corotated", "nodal", "nodal_regions", "volume_only", "clustered", "held_pairs"])
 def test_forces_are_the_energy_gradient_and_blocks_its_hessian(cube, name):
     element_set = _sets(cube)[name]
     rng = np.random.default_rng(RNG_SEED)
@@ -82,7 +83,7 @@ def test_forces_are_the_energy_gradient_and_blocks_its_hessian(cube, name):
     assert np.abs(exact - differenced).max() <= 1e-8 * np.abs(differenced).max()
 
 
-@pytest.mark.parametrize("name", ["corotated", "nodal", "nodal_regions", "volume_only", "clustered"])
+@pytest.mark.parametrize("name", ["corotated", "nodal", "nodal_regions", "volume_only", "clustered", "held_pairs"])
 def test_projected_blocks_are_symmetric_positive_semidefinite(cube, name):
     element_set = _sets(cube)[name]
     x = cube.points + 0.2 * np.random.default_rng(RNG_SEED + 1).standard_normal(cube.points.shape)
@@ -328,3 +329,49 @@ def test_clustered_volume_keeps_the_patch_test(irregular):
     J = np.linalg.det(np.eye(3) + strain)
     np.testing.assert_allclose(volume.volume_ratios(x), J, rtol=0, atol=1e-14)
     assert volume.domains.domain_count < 0.6 * irregular.node_count
+
+
+def test_free_node_domains_keep_the_patch_test_and_every_tet(irregular):
+    """With held nodes, the domains are the free nodes': a tet's volume goes to its free corners, each tet counted
+    once, and a uniform strain is still exact in every domain."""
+    held = irregular.points[:, 2] < 0.2
+    volume = NodalStrain(irregular.points, irregular.tets, 0.0, 1.0, clusters="pairs", held=held)
+    domains = volume.domains
+    np.testing.assert_allclose(domains.corner_share.sum(axis=1), 1.0, rtol=0, atol=1e-15)
+    tet_held = held[irregular.tets]
+    touched = (~tet_held).any(axis=1)
+    assert touched.any() and (~touched).any()  # the clamp has tets of held nodes only, and tets beside them
+    assert (domains.corner_share[touched][tet_held[touched]] == 0).all()
+    # Every domain with a free node holds only free nodes' shares; the body's volume is counted once.
+    np.testing.assert_allclose(domains.volumes.sum(), volume.kinematics.volumes.sum(), rtol=1e-14)
+    strain = np.array([[0.01, 0.003, 0.0], [0.0, -0.004, 0.002], [0.001, 0.0, 0.002]])
+    x = irregular.points @ (np.eye(3) + strain).T
+    np.testing.assert_allclose(volume.volume_ratios(x), np.linalg.det(np.eye(3) + strain), rtol=0, atol=1e-14)
+
+
+def test_a_scene_gives_the_volume_pairs_to_its_free_nodes(cube):
+    """Scene(model, pins=...) adapts the smoothed rung's volume pairs to the nodes its supports hold; a scene
+    without supports, and any other rung, keeps the very model it was given."""
+    from volspring import Pins, Scene
+
+    material = Material(E=1e6, nu=0.45, density=1000.0)
+    smoothed = Model.from_mesh(cube, material, model="smoothed")
+    clamp = np.flatnonzero(cube.points[:, 0] == 0)
+    scene = Scene(smoothed, pins=Pins(clamp))
+    volume = scene.model.elements[2]
+    assert smoothed.elements[2].held is None and volume.held[clamp].all() and volume.held.sum() == len(clamp)
+    assert scene.model.elements[:2] == smoothed.elements[:2]  # the shear sets do not depend on the supports
+    assert Scene(smoothed).model is smoothed
+    assert Scene(scene.model).model.elements[2].held is None  # adapted back when the supports go
+    springs = Model.from_mesh(cube, material)
+    assert Scene(springs, pins=Pins(clamp)).model is springs
+    # The adapted model is what a model file and a checkpoint store: it comes back bit for bit.
+    import tempfile
+    from pathlib import Path
+
+    from volspring.model_io import load_model, save_model
+
+    loaded = load_model(save_model(Path(tempfile.mkdtemp()) / "cube.vsmodel.npz", scene.model))
+    assert np.array_equal(loaded.elements[2].held, volume.held) and loaded.elements[2].cluster_rule == "pairs"
+    x = cube.points + 0.01 * np.random.default_rng(RNG_SEED).standard_normal(cube.points.shape)
+    assert np.array_equal(loaded.forces(x), scene.model.forces(x))

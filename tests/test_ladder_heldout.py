@@ -36,21 +36,23 @@ def _ratios(name, nu):
 @pytest.mark.parametrize("nu", [0.3, 0.49])
 def test_smoothed_rung_tracks_the_reference_where_springs_do_not(name, nu):
     ratios = _ratios(name, nu)
-    # Measured at alpha 0.65: 0.958-1.063 over these 8 runs (capsule 1.063 at nu 0.3, torus 0.958 at 0.49);
-    # springs 0.65-0.81.
-    assert abs(ratios["smoothed"] - 1) < 0.07
+    # Measured at alpha 0.65 with the volume domains given to the free nodes: 0.961-1.045 over these 8 runs
+    # (capsule 1.045 at nu 0.3, torus 0.961 at 0.49; 0.958-1.063 when clamped nodes kept domains); springs 0.65-0.81.
+    # 0.05 is that worst miss, rounded up: a regression floor, not the issue's 3% goal.
+    assert abs(ratios["smoothed"] - 1) < 0.05
     assert abs(ratios["smoothed"] - 1) < 0.4 * abs(ratios["springs"] - 1)
 
 
-_DRIFT_MISSES = {"capsule_gravity": "measured -7.7%: the volume constraints of domains at the clamped end cap",
-                 "bunny_gravity": "measured -5.3% (1.034 -> 0.979): 699 nodes, mostly on the surface"}
+_DRIFT_MISSES = {"bunny_gravity": "measured -5.0% (1.035 -> 0.983): not the clamp (free-node domains moved it "
+                                   "from -5.3%), nor the constraint count (clusters of four: -4.2%)"}
 
 
 @pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=_DRIFT_MISSES[name]))
                                   if name in _DRIFT_MISSES else name for name in HELDOUT_CASE_NAMES])
 def test_no_locking_from_nu_045_to_0499(name):
     """The issue's goal: the deflection ratio moves by less than 3% from nu 0.45 to 0.499 (P1 loses over 40%).
-    Measured with volume on node pairs: torus -1.4%, L-bracket -1.8% (volume on single nodes: -4.2%, -6.9%
-    against the converged reference)."""
+    Measured with volume on node pairs given to the free nodes (the scene's supports): torus -0.8%, capsule
+    -2.5%, L-bracket -1.5% (pairs with domains at clamped nodes: -1.4%, -7.8%, -1.8%; volume on single nodes:
+    torus -4.2%, L-bracket -6.9% against the converged reference)."""
     drift = _ratios(name, 0.499)["smoothed"] / _ratios(name, 0.45)["smoothed"] - 1
     assert abs(drift) < 0.03, drift

@@ -73,7 +73,8 @@ everything else (integrators, supports, collisions, output); it differs only in 
     :class:`~volspring.elements.NodalStrain` with shear alpha mu on node domains, and one with bulk
     lambda on pairs of nodes (:func:`~volspring.elements.tet_kinematics.pair_nodes`: one volume
     constraint per node locks partially on coarse meshes whose nodes are mostly on the surface,
-    ``benchmarks/study_locking.py``), mu and lambda straight from E and nu, no calibration. It passes
+    ``benchmarks/study_locking.py``; a scene gives the pairs' volume to the nodes its supports leave free,
+    :meth:`~volspring.elements.NodalStrain.supported`), mu and lambda straight from E and nu, no calibration. It passes
     the patch test (exact E and nu on any mesh); its stiffness couples each node's 2-ring (the
     implicit step applies it as a product, :mod:`volspring.integrators.implicit`).
 
@@ -92,7 +93,6 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring.elements import CorotatedTets, NodalStrain
-from volspring.elements.tet_kinematics import pair_nodes
 from volspring.material import Material, _real_number, _shown
 
 __all__ = ["DEFAULT_ALPHA", "MODELS", "TetMaterials", "network_moduli", "network_poisson_ratio", "smoothed_elements",
@@ -100,7 +100,8 @@ __all__ = ["DEFAULT_ALPHA", "MODELS", "TetMaterials", "network_moduli", "network
 
 MODELS = ("springs", "springs+volume", "smoothed")
 #: Weight of the nodal (smoothed) shear in the smoothed rung: the minimax of benchmarks/study_alpha.py over the
-#: held-out shapes at nu 0.3-0.49 (worst deflection error vs P2: 5.2% at 0.65; 8% at 0.6 and 8.8% at 0.7).
+#: held-out shapes at nu 0.25-0.49 (worst deflection error vs Taylor-Hood: 4.5% at 0.65; 7.8% at 0.6 and 9.8% at
+#: 0.7, volume domains given to the free nodes by the scene).
 DEFAULT_ALPHA = 0.65
 
 
@@ -340,7 +341,7 @@ def smoothed_elements(mesh, tet_materials, *, alpha=None, stiffness_damping=0.0)
     regions = tet_materials.regions
     return (CorotatedTets(mesh.points, mesh.tets, (1.0 - alpha) * mu, stiffness_damping=stiffness_damping),
             NodalStrain(mesh.points, mesh.tets, alpha * mu, 0.0, regions=regions, stiffness_damping=stiffness_damping),
-            NodalStrain(mesh.points, mesh.tets, 0.0, lam, regions=regions, clusters=pair_nodes(mesh.points, mesh.tets),
+            NodalStrain(mesh.points, mesh.tets, 0.0, lam, regions=regions, clusters="pairs",
                         stiffness_damping=stiffness_damping))
 
 

@@ -307,6 +307,15 @@ class Model:
         """A copy with more element sets (e.g. a volume term), everything else shared."""
         return replace(self, elements=self.elements + element_sets)
 
+    def supported(self, held) -> "Model":
+        """The model a scene simulates when its supports hold the nodes ``held`` ((n,) bool): each element set's
+        :meth:`~volspring.elements.ElementSet.supported`; the model itself when no set changes (springs
+        never do; the smoothed rung's volume pairs do)."""
+        elements = tuple(element_set.supported(held) for element_set in self.elements)
+        if all(new is old for new, old in zip(elements, self.elements)):
+            return self
+        return replace(self, elements=elements)
+
     @cached_property
     def spring_elements(self) -> Springs:
         """The model's :class:`~volspring.elements.Springs` (an empty set when it has none)."""

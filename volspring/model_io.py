@@ -26,7 +26,8 @@ The file is a compressed ``.npz`` (numpy, read without pickle), by convention na
     the model's first ``node_count``: ``node_count`` () int64, ``tets`` (T, 4) int64,
     ``stiffness_damping`` () float64 [s], and per tet ``shear`` (T,) float64 [Pa]; a nodal strain
     set also ``bulk`` (T,) float64 [Pa] and ``regions`` (T,) int64, and ``clusters`` (n,) int64 when
-    its domains are clusters of nodes (its per-domain coefficients and smoothing domains are rebuilt
+    its domains are clusters of nodes, with ``cluster_rule`` () text ``"pairs"`` when they are node pairs
+    that a scene gives to its free nodes, and ``held`` (n,) bool once it has (its per-domain coefficients and smoothing domains are rebuilt
     from these). For angle and dihedral springs (:mod:`volspring.elements.angles`): ``chains`` (e, 3) or
     (e, 4) int64, ``stiffness`` (e,) float64 [N m/rad^2], ``rest_angles`` (e,) float64 [rad];
 ``has_topology`` () bool, and ``topology/NAME``
@@ -115,6 +116,10 @@ def _nodal_strain_arrays(nodal: NodalStrain) -> dict:
     arrays = _continuum_common(nodal) | nodal.per_tet()
     if nodal.clusters is not None:
         arrays["clusters"] = np.asarray(nodal.clusters, dtype=np.int64)
+    if nodal.cluster_rule is not None:
+        arrays["cluster_rule"] = np.asarray(nodal.cluster_rule)
+    if nodal.held is not None:
+        arrays["held"] = np.asarray(nodal.held, dtype=bool)
     return arrays
 
 
@@ -141,8 +146,15 @@ def _nodal_strain_from_arrays(arrays, path, prefix, rest_positions) -> NodalStra
     clusters = None  # files before node clusters have none: one domain per node
     if prefix + "clusters" in arrays:
         clusters = take_array(arrays, prefix + "clusters", path, shape=(len(rest),), kind="i")
-    return NodalStrain(rest, tets, per_tet("shear"), per_tet("bulk"), regions=regions, clusters=clusters,
-                       stiffness_damping=damping)
+    held = take_array(arrays, prefix + "held", path, shape=(len(rest),), kind="b") if prefix + "held" in arrays else None
+    nodal = NodalStrain(rest, tets, per_tet("shear"), per_tet("bulk"), regions=regions, clusters=clusters, held=held,
+                        stiffness_damping=damping)
+    if prefix + "cluster_rule" in arrays:  # files before supported pairs have none: the clusters stay as stored
+        rule = str(take_array(arrays, prefix + "cluster_rule", path, shape=(), kind="U"))
+        if rule != "pairs" or clusters is None:
+            raise ValueError(f"{path} is damaged: {prefix}cluster_rule = {rule!r}; expected 'pairs', with clusters")
+        nodal.cluster_rule = rule
+    return nodal
 
 
 def _check_rebuilt_from(model, index, element_set) -> None:

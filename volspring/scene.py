@@ -77,6 +77,10 @@ class Scene:
     ----------
     held : (n, 3) bool -- the components any support prescribes (read-only)
     free : (n,) bool -- nodes with at least one free component
+    model : Model -- the model given, adapted to the nodes the supports hold in all three components
+        (:meth:`Model.supported`): the smoothed rung pairs its volume domains anew so that no domain is
+        held whole (a domain of held nodes only would lock the free nodes around it); any other model,
+        or a scene without supports, keeps the very model given
 
     Obstacles and constraints have ``project(x, v, x_start, t, dt, free)``: after a step from
     ``x_start`` they move the free nodes' positions ``x`` (and fix velocities ``v``) in place.
@@ -145,6 +149,8 @@ class Scene:
             held[support.nodes] |= support.held
         held.setflags(write=False)
         object.__setattr__(self, "held", held)
+        # The model's discretisation where it depends on the supports (the smoothed rung's volume pairs).
+        object.__setattr__(self, "model", self.model.supported(held.all(axis=1)))
 
     @property
     def all_supports(self) -> tuple:

@@ -214,6 +214,12 @@ class ElementSet(ABC):
         """
         return None
 
+    def supported(self, held) -> "ElementSet":
+        """The set a scene uses once its supports hold the nodes ``held`` ((n,) bool: all three components
+        prescribed); the set itself by default. A set whose discretisation depends on the supports
+        (:meth:`volspring.elements.NodalStrain.supported`) returns an adapted copy."""
+        return self
+
     def check(self, node_count: int) -> None:
         """Refuse a stencil that is not (e, k) integer node indices below ``node_count``."""
         stencil = np.asarray(self.stencil)

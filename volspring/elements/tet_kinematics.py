@@ -233,29 +233,47 @@ class SmoothingDomains:
     regions : (T,) int, optional -- material region of every tet (domains never cross regions)
     clusters : (n,) int, optional -- a cluster label per node: a domain is then a cluster of nodes (within
         one region) and the tets around any of them, e.g. :func:`pair_nodes`; default one node per domain
+    held : (n,) bool, optional -- nodes the supports hold in place: the domains are then the free nodes'.
+        A tet's volume is shared equally among its free corners (a held corner gives nothing, and sits in
+        the domain of its tet's first free corner only to keep the arrays' shape); a tet with no free
+        corner keeps quarter shares, in domains of its own nodes that no free node is part of. Why: a
+        domain of held nodes can change its volume only through the free nodes around it, so its
+        constraint falls on them on top of their own, and a clamped end locks (``benchmarks/study_locking.py``)
 
     Attributes
     ----------
-    node : (d,) int -- the node of each domain (its cluster label with ``clusters``)
+    node : (d,) int -- the node of each domain (its cluster label with ``clusters``; past every label for the
+        domains of tets with no free corner, with ``held``)
     region : (d,) int -- its region
     volumes : (d,) float -- V_d [m^3]
     ring_domain, ring_node : (r,) int -- the ring entries: domain and ring node, sorted by domain
     ring_gradient : (r, 3) float -- gbar_da of each ring entry [1/m]
     corner_entry : (T, 4, 4) int -- ring entry of (domain of corner c of tet t, node of corner a)
     corner_domain : (T, 4) int -- domain of corner c of tet t
+    corner_share : (T, 4) float -- the share of tet t's volume that corner c gives its domain (1/4 each
+        unless nodes are ``held``; every row sums to 1)
     """
 
-    def __init__(self, gradients: TetGradients, node_count: int, regions=None, clusters=None):
+    def __init__(self, gradients: TetGradients, node_count: int, regions=None, clusters=None, held=None):
         tets = gradients.tets
         T = len(tets)
         regions = np.zeros(T, dtype=np.int64) if regions is None else np.asarray(regions, dtype=np.int64)
         region_count = int(regions.max()) + 1 if T else 1
         owners = tets if clusters is None else np.asarray(clusters, dtype=np.int64)[tets]
+        self.corner_share = np.full((T, 4), 0.25)
+        if held is not None:
+            free = ~np.asarray(held, dtype=bool)[tets]
+            touched = free.any(axis=1)
+            self.corner_share[touched] = free[touched] / free[touched].sum(axis=1, keepdims=True)
+            first_free = owners[np.arange(T), np.argmax(free, axis=1)]
+            held_only = owners.max(initial=-1) + 1 + tets  # labels no cluster uses
+            owners = np.where(free, owners, np.where(touched[:, None], first_free[:, None], held_only))
         keys = owners * region_count + regions[:, None]  # (T, 4): domain key of each corner
         domain_keys, corner_domain = np.unique(keys, return_inverse=True)
         self.corner_domain = corner_domain.reshape(T, 4)
         self.node, self.region = np.divmod(domain_keys, region_count)
-        self.volumes = np.bincount(self.corner_domain.ravel(), weights=np.repeat(gradients.volumes / 4.0, 4),
+        self.volumes = np.bincount(self.corner_domain.ravel(), weights=(gradients.volumes[:, None] *
+                                                                        self.corner_share).ravel(),
                                    minlength=len(domain_keys))
         # Ring entries: (domain of corner c, node of corner a) for every tet, corner pair.
         domain_of = np.broadcast_to(self.corner_domain[:, :, None], (T, 4, 4))
@@ -264,7 +282,7 @@ class SmoothingDomains:
         unique_entries, corner_entry = np.unique(entry_keys, return_inverse=True)
         self.corner_entry = corner_entry.reshape(T, 4, 4)
         self.ring_domain, self.ring_node = np.divmod(unique_entries, node_count)
-        weights = (gradients.volumes[:, None] / (4.0 * self.volumes[self.corner_domain]))[:, :, None, None]
+        weights = (gradients.volumes[:, None] * self.corner_share / self.volumes[self.corner_domain])[:, :, None, None]
         self.ring_gradient = self.sum_to_ring(weights * gradients.gradients[:, None, :, :])
         self.node_count = node_count
 
