@@ -29,7 +29,7 @@ import secrets
 import time
 from pathlib import Path
 
-__all__ = ["TEMPORARY_MARKER", "atomic_path", "is_temporary_name", "remove_stale_temporaries"]
+__all__ = ["TEMPORARY_MARKER", "atomic_path", "interruptions_first", "is_temporary_name", "remove_stale_temporaries"]
 
 logger = logging.getLogger(__name__)
 
@@ -91,7 +91,8 @@ def atomic_path(path):
                 tmp = None  # someone else's file: never remove it
         else:
             raise FileExistsError(f"could not create a temporary file beside {path} in {_CREATE_ATTEMPTS} attempts")
-        yield tmp
+        with interruptions_first():
+            yield tmp
         # The file was created readable by its owner only; give it the mode a plain open() would.
         umask = os.umask(0)
         os.umask(umask)
@@ -101,6 +102,39 @@ def atomic_path(path):
         if tmp is not None:
             with contextlib.suppress(FileNotFoundError):
                 os.unlink(tmp)
+        raise
+
+
+@contextlib.contextmanager
+def interruptions_first():
+    """Within the block, an interruption that clean-up code masked with an error of its own is raised instead.
+
+    A signal turned into an exception (``KeyboardInterrupt``, ``volspring._signals.Interrupted``: both
+    derive from ``BaseException`` only) can arrive inside a library's writer, whose clean-up then fails
+    on the half-done state and raises an ordinary error with the interruption as its context: zipfile,
+    under ``np.savez``, raises "Can't close the ZIP file while there is an open writing handle". A
+    command would report that error (exit status 1) instead of the stop (130, 143). Here the first
+    interruption in the error's context chain is raised, the masking error dropped.
+
+    Examples
+    --------
+    >>> import io, zipfile
+    >>> try:
+    ...     with interruptions_first(), zipfile.ZipFile(io.BytesIO(), "w") as archive:
+    ...         archive.open("x", "w").write(b"half")
+    ...         raise KeyboardInterrupt
+    ... except KeyboardInterrupt:
+    ...     print("interrupted")
+    interrupted
+    """
+    try:
+        yield
+    except Exception as error:
+        context = error.__context__
+        while context is not None:
+            if not isinstance(context, Exception):
+                raise context from None
+            context = context.__context__
         raise
 
 

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from meshing._io import atomic_path
+from meshing._io import atomic_path, interruptions_first
 from volspring.scene import State
 
 __all__ = ["save_checkpoint", "load_checkpoint", "CheckpointMismatch", "model_fingerprint"]
@@ -186,7 +186,8 @@ def save_checkpoint(path, state: State, *, scene=None, integrator=None, dt=None)
     arrays["__manifest__"] = np.asarray(json.dumps(manifest))
     path = Path(path)
     buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
+    with interruptions_first():  # a stop inside savez surfaces as itself, not as zipfile's clean-up error
+        np.savez(buffer, **arrays)
     with atomic_path(path) as tmp:
         tmp.write_bytes(buffer.getvalue())
     logger.debug("saved checkpoint at step %d (t = %g s) to %s", state.step, state.t, path)
