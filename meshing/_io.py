@@ -121,7 +121,7 @@ def interruptions_first():
     >>> import io, zipfile
     >>> try:
     ...     with interruptions_first(), zipfile.ZipFile(io.BytesIO(), "w") as archive:
-    ...         archive.open("x", "w").write(b"half")
+    ...         _ = archive.open("x", "w").write(b"half")
     ...         raise KeyboardInterrupt
     ... except KeyboardInterrupt:
     ...     print("interrupted")
