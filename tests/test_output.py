@@ -27,12 +27,24 @@ def model(mesh):
 
 
 def states(model, count, *, seed=0):
-    """Frames of a made-up motion: a growing shear plus noise, times that are not round in binary."""
+    """Frames of a made-up motion: a growing shear plus noise, a frame every ten steps of 0.01 s, the time
+    summed step by step as the integrators do (0.09999999999999999, not 0.1: see :func:`frame_times`)."""
     rng = np.random.default_rng(seed)
     x0 = model.rest_positions
     shear = np.array([[1.0, 0.0, 0.2], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-    return [State(x0 + k * 0.05 * (x0 @ (shear - np.eye(3)).T) + 1e-3 * rng.standard_normal(x0.shape),
-                  rng.standard_normal(x0.shape), t=0.1 * k + 1 / 3, step=10 * k) for k in range(count)]
+    frames, t = [], 0.0
+    for k in range(count):
+        frames.append(State(x0 + k * 0.05 * (x0 @ (shear - np.eye(3)).T) + 1e-3 * rng.standard_normal(x0.shape),
+                            rng.standard_normal(x0.shape), t=t, step=10 * k))
+        for _ in range(10):
+            t += 0.01
+    return frames
+
+
+def frame_times(count):
+    """The times the writer lists for :func:`states`: the decimals 0.0, 0.1, 0.2, ... (k / 10 is the float
+    nearest each), not the summed floats."""
+    return [k / 10 for k in range(count)]
 
 
 def leftovers(directory):
@@ -73,8 +85,9 @@ def test_pvd_lists_the_frames_with_their_real_times(tmp_path, model):
         root = ET.parse(pvd).getroot()  # valid XML, or this raises
         assert root.tag == "VTKFile" and root.get("type") == "Collection"
         entries = read_pvd(pvd)
-        # Times are written with repr: they read back exactly, not to a printed precision.
-        assert [time for time, _ in entries] == [state.t for state in frames]
+        # Times are the frames' decimal times (not t += dt's floats), written with repr: exactly "0.1".
+        assert [time for time, _ in entries] == frame_times(4) != [state.t for state in frames]
+        assert [item.get("timestep") for item in root.iter("DataSet")] == ["0.0", "0.1", "0.2", "0.3"]
         assert all(file.is_file() and file.parent == tmp_path for _, file in entries)
         # Files are named relative to the PVD, so the folder can be moved.
         assert all("/" not in item.get("file") for item in root.iter("DataSet"))
@@ -101,7 +114,7 @@ def test_a_failing_frame_leaves_no_partial_file_and_a_valid_pvd(tmp_path, model,
     assert not (tmp_path / "frame_0002.vtu").exists() and not (tmp_path / "frame_springs_0002.vtu").exists()
     for pvd in ("frame.pvd", "frame_springs.pvd"):
         entries = read_pvd(tmp_path / pvd)
-        assert [time for time, _ in entries] == [frames[0].t, frames[1].t]
+        assert [time for time, _ in entries] == frame_times(2)
         assert all(meshio.read(file).points.shape == (model.node_count, 3) for _, file in entries)
     # The writer goes on after the failure with the frame it could not write.
     writer(2, frames[2])
@@ -137,11 +150,11 @@ def test_resume_keeps_earlier_frames_and_continues_numbering(tmp_path, model):
         first(k, state)
     # A resumed run restarts from frame 2 (its checkpoint): frames 0 and 1 are kept.
     again = ParaViewWriter(tmp_path, model, first_frame=2)
-    assert [time for time, _ in read_pvd(again.pvd_path)] == [frames[0].t, frames[1].t]
+    assert [time for time, _ in read_pvd(again.pvd_path)] == again.times == frame_times(2)
     for state in frames[2:]:
         again(0, state)
     entries = read_pvd(tmp_path / "frame.pvd")
-    assert [time for time, _ in entries] == [state.t for state in frames]
+    assert [time for time, _ in entries] == frame_times(4)
     assert [file.name for _, file in entries] == [f"frame_{k:04d}.vtu" for k in range(4)]
     with pytest.raises(ValueError, match="lists 4 frame"):
         ParaViewWriter(tmp_path, model, first_frame=9)

@@ -1,4 +1,4 @@
-"""ParaView output: one VTU per frame and a PVD collection with the real times.
+"""ParaView output: one VTU per frame and a PVD collection with the frames' decimal times.
 
 Layout of a series named ``NAME`` in ``directory``:
 
@@ -10,8 +10,21 @@ Layout of a series named ``NAME`` in ``directory``:
 ``NAME_springs.pvd`` and ``NAME_springs_0000.vtu``, ...
     every spring as a ``line`` cell over all nodes (shell nodes included): point data
     ``displacement`` and ``velocity``, cell data ``strain`` ((l - l0) / l0 [-]) and ``kind``
-    (index into :data:`volspring.SPRING_KINDS`). Written for a model with springs only: the
-    ``"smoothed"`` rung has none, and its output is the tet series alone.
+    (index into :data:`volspring.SPRING_KINDS`), and the names of those codes as field data: one
+    array ``kind=NAME`` holding the code of each kind the model has (``kind=tet_edge`` = 0,
+    ``kind=shell`` = 1, ...; ParaView's Information panel lists them beside the arrays). Written
+    for a model with springs only: the ``"smoothed"`` rung has none, and its output is the tet
+    series alone.
+
+Times. Each VTU carries its time [s] as field data ``TimeValue`` (the one-value Float64 array
+VTK's own XML writers add for a time step), equal to its time in the PVD. Both are the frame's
+intended decimal time, not the float the integrator reached by adding ``dt`` step after step:
+ten steps of 0.1 s are written ``1.0``, not ``0.9999999999999999``, so a ParaView script's
+``set_active_time_value(1.0)`` finds the frame.
+The writer receives a state's time ``t`` and its step count, not ``dt``; it writes the decimal with
+the fewest significant digits within the round-off that ``step`` additions can leave on ``t``
+(:func:`_frame_time`). For a step that is a decimal (0.1, 0.003, 1e-5) that is exactly ``step *
+dt`` for runs of up to some 10^7 steps; any other time stays within that round-off of ``t``.
 
 Tets and springs are two series rather than one file of mixed cells because ParaView colours a
 mixed grid by one cell array covering every cell: a spring strain would need a made-up value on
@@ -31,6 +44,7 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -38,6 +52,7 @@ import numpy as np
 
 from meshing._io import atomic_path
 from meshing.geometry import signed_tet_volumes
+from meshing.topology import SPRING_KINDS
 
 __all__ = ["ParaViewWriter", "read_pvd", "tet_strains", "write_pvd"]
 
@@ -49,17 +64,21 @@ def write_pvd(path, entries) -> Path:
 
     Parameters
     ----------
-    path : path-like -- the ``.pvd`` file
-    entries : sequence of (float, str) -- (time [s], file name relative to the PVD's folder)
+    path : path-like
+        The ``.pvd`` file.
+    entries : sequence of (float, str)
+        (time [s], file name relative to the PVD's folder) of each dataset.
 
     Returns
     -------
-    Path -- ``path``
+    Path
+        ``path``.
     """
     root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
     collection = ET.SubElement(root, "Collection")
     for time, file in entries:
-        # repr of a float round-trips exactly, so the times read back are the times written.
+        # repr of a float is the shortest decimal that round-trips: the times read back are the times
+        # written, and a decimal time (ParaViewWriter's) is written as that decimal ("1.0", "0.021").
         ET.SubElement(collection, "DataSet", timestep=repr(float(time)), group="", part="0", file=str(file))
     ET.indent(root)
     path = Path(path)
@@ -73,11 +92,13 @@ def read_pvd(path) -> list:
 
     Parameters
     ----------
-    path : path-like -- a ``.pvd`` file
+    path : path-like
+        A ``.pvd`` file.
 
     Returns
     -------
-    list of (float, Path) -- (time [s], absolute path of the dataset file), in file order
+    list of (float, Path)
+        (time [s], absolute path of the dataset file) of each dataset, in file order.
 
     Raises
     ------
@@ -95,30 +116,103 @@ def read_pvd(path) -> list:
             for item in root.find("Collection").iter("DataSet")]
 
 
+def _frame_time(t, steps) -> float:
+    """The decimal time [s] a frame at time ``t`` after ``steps`` steps stands for.
+
+    The integrators advance time by ``t + dt`` each step, and the writer is given ``t`` and the
+    step count, not ``dt``: so the intended time ``steps * dt`` is recovered from ``t`` alone, as
+    the decimal with the fewest significant digits that lies within the round-off ``steps``
+    additions can accumulate. That bound: each addition rounds by at most half an ulp of the sum,
+    at most ``eps |t| / 2``, and ``dt``'s own representation error, ``steps`` times over, adds
+    about the same once more, so ``(steps + 1) eps |t| / 2`` in all; twice that is the slack.
+    For a ``dt`` of d decimal places, ``steps * dt`` has d places too, and any other decimal of
+    no more significant digits near it is at least 10^-d away: more than the slack, which grows
+    as ``steps^2 eps dt`` and reaches 10^-d / 2 only after some 3 10^7 steps. So the decimal
+    found is ``steps * dt`` exactly. The slack is also capped at a quarter of the mean step
+    ``|t| / steps``, so that frames of a run started at t = 0 keep their order whatever the step
+    count. Deterministic in (t, steps): a resumed run writes the same times as an uninterrupted one.
+
+    >>> t = 0.0
+    >>> for _ in range(10):
+    ...     t += 0.1
+    >>> t, _frame_time(t, 10), _frame_time(0.003 * 7, 7), _frame_time(1 / 3, 0) == 1 / 3
+    (0.9999999999999999, 1.0, 0.021, True)
+    """
+    slack = min((steps + 1) * sys.float_info.epsilon * abs(t), abs(t) / (4 * max(steps, 1)))
+    for digits in range(1, 18):  # 17 significant digits round-trip any float: the loop always returns
+        candidate = float(f"{t:.{digits - 1}e}")
+        if abs(candidate - t) <= slack:
+            return candidate
+    return t
+
+
+def _add_field_data(path, arrays) -> None:
+    """Add a ``<FieldData>`` block of one-value arrays to a VTU file written by meshio.
+
+    meshio (5.3) reads a VTU's field data but its writer drops ``Mesh.field_data``
+    (nschloe/meshio#1546), so the block is spliced in at the start of ``<UnstructuredGrid>``,
+    where VTK's XML readers and meshio's reader look for it. ASCII arrays: one value each, read
+    back exactly (a float written with repr).
+
+    Parameters
+    ----------
+    path : Path
+        The VTU file, rewritten in place (the caller's temporary file).
+    arrays : dict of str to float or int
+        The arrays: a float as ``Float64``, an int as ``Int32``.
+    """
+    block = ET.Element("FieldData")
+    for name, value in arrays.items():
+        array = ET.SubElement(block, "DataArray", type="Float64" if isinstance(value, float) else "Int32",
+                              Name=name, NumberOfTuples="1", format="ascii")
+        array.text = repr(value)
+    text = path.read_bytes()
+    tag = b"<UnstructuredGrid>"
+    at = text.find(tag)
+    if at < 0:
+        raise RuntimeError(f"{path}: meshio wrote no {tag.decode()} element; cannot add the field data "
+                           f"{', '.join(arrays)}")
+    at += len(tag)
+    path.write_bytes(text[:at] + b"\n" + ET.tostring(block) + text[at:])
+
+
 class ParaViewWriter:
     """Write a simulation as VTU frames plus PVD collections; usable as a ``simulate`` callback.
 
     Parameters
     ----------
-    directory : path-like -- output folder, created if missing
-    model : Model -- the model being simulated; the tet series needs ``model.topology``
-        (a model built from arrays has springs only)
-    name : str -- file name prefix (see the module docstring for the layout)
-    springs : bool, optional -- also write the spring series; default: when the model has springs
-        (True for a model without springs is refused: the series would be empty)
-    first_frame : int -- resume an earlier series: keep its first ``first_frame`` frames (files
-        and PVD entries) and write the next frame as number ``first_frame``; 0 (default) starts
-        afresh. Raises if the existing PVD lists fewer frames.
-    record : callable, optional -- called as ``record(*paths)`` with the files of each frame (and
-        the PVD files) before any of them is written, such as :meth:`RunFolder.record`; default None
-    triangles : (f, 3) int, optional -- a surface made of the model's own nodes (a cloth's triangles,
-        :func:`volspring.structures.sheet_grid`): written as one more series, ``NAME_surface.pvd``
+    directory : path-like
+        Output folder, created if missing.
+    model : Model
+        The model being simulated; the tet series needs ``model.topology`` (a model built from
+        arrays has springs only).
+    name : str
+        File name prefix (see the module docstring for the layout).
+    springs : bool, optional
+        Also write the spring series; default: when the model has springs (True for a model
+        without springs is refused: the series would be empty).
+    first_frame : int
+        Resume an earlier series: keep its first ``first_frame`` frames (files and PVD entries)
+        and write the next frame as number ``first_frame``; 0 (default) starts afresh. Raises if
+        the existing PVD lists fewer frames.
+    record : callable, optional
+        Called as ``record(*paths)`` with the files of each frame (and the PVD files) before any
+        of them is written, such as :meth:`RunFolder.record`; default None.
+    triangles : (f, 3) int, optional
+        A surface made of the model's own nodes (a cloth's triangles,
+        :func:`volspring.structures.sheet_grid`): written as one more series, ``NAME_surface.pvd``.
+
+    Attributes
+    ----------
+    times : list of float
+        The time [s] of each frame written (or kept on resuming), as the PVD lists it.
 
     Notes
     -----
     Frames are numbered by the writer itself, one per call, whatever frame index the caller
     passes, so a resumed run continues the numbering. The writer returns None; ``simulate``
-    only stops on an explicit False.
+    only stops on an explicit False. A frame's time is the decimal its step count and ``t``
+    stand for (module docstring, "Times").
 
     Examples
     --------
@@ -130,8 +224,8 @@ class ParaViewWriter:
     >>> model = Model.from_mesh(mesh, Material(E=1e5, nu=0.3, density=1000.0))
     >>> writer = ParaViewWriter(tempfile.mkdtemp(), model)
     >>> writer(0, Scene(model).initial_state())
-    >>> writer.frame_count, writer.pvd_path.name
-    (1, 'frame.pvd')
+    >>> writer.frame_count, writer.pvd_path.name, writer.times
+    (1, 'frame.pvd', [0.0])
     """
 
     def __init__(self, directory, model, *, name="frame", springs=None, first_frame=0, record=None, triangles=None):
@@ -160,6 +254,8 @@ class ParaViewWriter:
         if self.mesh is not None:
             self._rest_volumes = self.mesh.tet_volumes
             self._rest_inverses = _rest_inverses(self.mesh)
+        if self.springs:  # the names of the kind codes, as field data of the spring series
+            self._kind_names = {f"kind={SPRING_KINDS[code]}": int(code) for code in np.unique(model.kinds)}
         self._record = record
         self.directory.mkdir(parents=True, exist_ok=True)
         self._entries = {"body": [], "springs": [], "surface": []}
@@ -227,11 +323,14 @@ class ParaViewWriter:
 
         Parameters
         ----------
-        state : State -- positions ``x`` (n, 3) [m], velocities ``v`` (n, 3) [m/s], time ``t`` [s]
+        state : State
+            Positions ``x`` (n, 3) [m], velocities ``v`` (n, 3) [m/s], time ``t`` [s] and the
+            number of steps ``step`` taken to reach it.
 
         Returns
         -------
-        int -- the number of the frame written
+        int
+            The number of the frame written.
 
         Raises
         ------
@@ -239,54 +338,57 @@ class ParaViewWriter:
             If the state does not fit the model, holds NaN or Inf, or its time is not after the
             previous frame's. Nothing is written then.
         """
-        x, v, t = _checked_state(state, self.model.node_count, self.frame_count)
-        if self.times and not t > self.times[-1]:
-            raise ValueError(f"frame {self.frame_count} has t = {t!r} s, not after the previous frame's "
-                             f"t = {self.times[-1]!r} s")
+        x, v, t, steps = _checked_state(state, self.model.node_count, self.frame_count)
+        time = _frame_time(t, steps)
+        if self.times and not time > self.times[-1]:
+            raise ValueError(f"frame {self.frame_count} has t = {t!r} s (written {time!r} s), not after the "
+                             f"previous frame's t = {self.times[-1]!r} s")
         displacement = x - self.model.rest_positions
         self._announce(*self.frame_paths())
         files = {}
         try:
-            self._write_frame(x, v, displacement, files)
+            self._write_frame(x, v, displacement, time, files)
         except BaseException:
             for path in files.values():  # complete files of a frame never listed: remove them
                 path.unlink(missing_ok=True)
             raise
         for series, file in files.items():
-            self._entries[series].append((t, file.name))
+            self._entries[series].append((time, file.name))
             write_pvd(self._pvd(series), self._entries[series])
-        self.times.append(t)
+        self.times.append(time)
         self.frame_count += 1
-        logger.debug("wrote frame %d (t = %g s) to %s", self.frame_count - 1, t, self.directory)
+        logger.debug("wrote frame %d (t = %r s) to %s", self.frame_count - 1, time, self.directory)
         return self.frame_count - 1
 
-    def _write_frame(self, x, v, displacement, files):
+    def _write_frame(self, x, v, displacement, time, files):
         from volspring.springs import spring_strains
 
         if self.mesh is not None:
             n = self.mesh.node_count
             ratio = signed_tet_volumes(x, self.mesh.tets) / self._rest_volumes
             files["body"] = self._write_vtu(
-                "body", x[:n], [("tetra", self.mesh.tets)],
+                "body", x[:n], [("tetra", self.mesh.tets)], time,
                 point_data={"displacement": displacement[:n], "velocity": v[:n]},
                 cell_data={"volume_ratio": [ratio], "strain": [tet_strains(self.mesh.tets, self._rest_inverses, x)]})
         if self.springs:
             strain = spring_strains(self.model, x)
             files["springs"] = self._write_vtu(
-                "springs", x, [("line", self.model.springs)],
+                "springs", x, [("line", self.model.springs)], time,
                 point_data={"displacement": displacement, "velocity": v},
-                cell_data={"strain": [strain], "kind": [self.model.kinds.astype(np.int32)]})
+                cell_data={"strain": [strain], "kind": [self.model.kinds.astype(np.int32)]},
+                field_data=self._kind_names)
         if self.triangles is not None:
-            files["surface"] = self._write_vtu("surface", x, [("triangle", self.triangles)],
+            files["surface"] = self._write_vtu("surface", x, [("triangle", self.triangles)], time,
                                                point_data={"displacement": displacement, "velocity": v}, cell_data={})
 
-    def _write_vtu(self, series, points, cells, *, point_data, cell_data) -> Path:
+    def _write_vtu(self, series, points, cells, time, *, point_data, cell_data, field_data=None) -> Path:
         import meshio
 
         path = self._vtu(series, self.frame_count)
         with atomic_path(path) as tmp:
             meshio.write(tmp, meshio.Mesh(points, cells, point_data=point_data, cell_data=cell_data),
                          file_format="vtu")
+            _add_field_data(tmp, {"TimeValue": float(time), **(field_data or {})})
         return path
 
 
@@ -323,10 +425,13 @@ def tet_strains(tets, rest_inverses, x) -> np.ndarray:
 
 
 def _checked_state(state, node_count, frame):
-    """(x, v, t) of a state, after checking shapes and that everything is finite."""
+    """(x, v, t, step) of a state, after checking shapes, the step count and that everything is finite."""
     x = np.asarray(state.x, dtype=np.float64)
     v = np.asarray(state.v, dtype=np.float64)
     t = float(state.t)
+    steps = int(state.step)
+    if steps < 0:
+        raise ValueError(f"frame {frame}: step = {steps} is not >= 0")
     if x.shape != (node_count, 3) or v.shape != (node_count, 3):
         raise ValueError(f"frame {frame}: x and v must have shape ({node_count}, 3), got {x.shape} and {v.shape}")
     if not math.isfinite(t):
@@ -335,4 +440,4 @@ def _checked_state(state, node_count, frame):
     if bad.any():
         raise ValueError(f"frame {frame} (t = {t:.6g} s): {int(bad.sum())} node(s) have non-finite positions or "
                          f"velocities, first is node {int(np.flatnonzero(bad)[0])}; refusing to write NaN or Inf")
-    return x, v, t
+    return x, v, t, steps
