@@ -6,7 +6,9 @@ A mesh file (any volume format meshio reads), a spring topology file from ``vols
 :mod:`volspring.ladder`), a material (and one per region tag of the mesh file, ``--region-material``), pins by regions (``--pin xmin``, ``--pin "x<0.01"``,
 ``--pin XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX``: :func:`volspring.regions.parse_region`), gravity, an integrator and a step; frames written as a
 ParaView series (and optionally a Blender surface cache), checkpoints to resume from, a progress bar
-on stderr and a summary on stdout. A fuller scene format is for a later version.
+on stderr and a summary on stdout. A scene file (``volspring-sim scene.toml``, :mod:`volspring.scene_file`)
+writes down several bodies, supports, fields, obstacles, contact, the integrator and the outputs; the flags
+given override its values, and ``--set KEY.PATH=VALUE`` any of them.
 
 Exit status: 0 success, 1 bad input or failed run (one ``volspring-sim: error: ...`` line on
 stderr), 2 bad command line, 3 the simulation diverged (the output folder then holds only the

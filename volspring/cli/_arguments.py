@@ -11,7 +11,8 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["InputError", "UsageError", "build_parser", "check_arguments", "joined_vectors", "region_materials"]
+__all__ = ["BODY_FLAGS", "RUN_FLAGS", "InputError", "UsageError", "build_parser", "check_arguments", "given_options",
+           "joined_vectors", "region_materials"]
 
 PROG = "volspring-sim"
 CHECKPOINT_NAME = "checkpoint.npz"
@@ -22,6 +23,20 @@ DEFAULT_NU = 0.45
 VECTOR_OPTIONS = ("--pin", "--gravity")  # values that may start with a minus sign (-0.1,-1,-1,... or -9.81)
 PIN_FORMS = ("XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (a box; also box:...), xmin|xmax|ymin|ymax|zmin|zmax (a face of the "
              "body's bounding box), x<V, x>V (a half-space; <=, >= too) or x=V (a plane), any axis")
+SCENE_SUFFIX = ".toml"
+# With a scene file, a flag given overrides the scene value at its key path (volspring.scene_file): the flags of
+# the body (of its only body; refused for several) and those of the run. --gravity, --drag and --pin edit the
+# scene's fields and supports (volspring.cli._build.scene_with_flags); --resume, --overwrite, --progress and
+# --quiet are not part of a scene.
+BODY_FLAGS = {"size": "size", "mesher": "mesher", "seed": "seed", "units": "units", "scale": "scale",
+              "model": "model", "alpha": "alpha", "E": "material.E", "nu": "material.nu",
+              "density": "material.density", "rule": "rule", "stiffness": "stiffness",
+              "damping_ratio": "damping_ratio"}
+RUN_FLAGS = {"integrator": "integrator.name", "dt": "integrator.dt", "guard": "integrator.guard",
+             "newton_iterations": "integrator.newton_iterations", "runaway_factor": "integrator.runaway_factor",
+             "duration": "duration", "frame_dt": "output.frame_dt", "out": "output.folder",
+             "blender": "output.blender", "render_surface": "output.render_surface",
+             "checkpoint_every": "output.checkpoint_every"}
 
 
 class UsageError(Exception):
@@ -59,7 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("input", metavar="INPUT",
                         help="a volume mesh file (.msh, .vtu, .mesh, ...), a spring topology file from "
                              "volspring-mesh (.vstopo.npz, any .npz: the tet mesh with its shells, which the model "
-                             "then has), or a built-in shape NAME:D1,D2,... such as box:1,0.1,0.1 or sphere:0.5 [m]")
+                             "then has), a built-in shape NAME:D1,D2,... such as box:1,0.1,0.1 or sphere:0.5 [m], "
+                             f"or a scene file (*{SCENE_SUFFIX}: bodies, supports, fields, contact, integrator, "
+                             "outputs; the flags given override its values)")
     body = parser.add_argument_group("body")
     body.add_argument("--size", type=float, help="tet edge length for a built-in shape, in --units "
                                                  "(default: a tenth of its extent, at most half its smallest side)")
@@ -133,7 +150,24 @@ def build_parser() -> argparse.ArgumentParser:
     output.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
                         help="progress bar on stderr (default: when stderr is a terminal)")
     output.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary")
+    scene_file = parser.add_argument_group("scene file")
+    scene_file.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
+                            help=f"with a scene file INPUT (*{SCENE_SUFFIX}): set the value at a key path, VALUE read "
+                                 "as TOML (bodies[1].material.E=2e6, fields[0].g=[0,0,-1]; indices from 0), after "
+                                 "the flags; repeatable")
     return parser
+
+
+def given_options(argv) -> set:
+    """The destinations (``"E"``, ``"dt"``, ``"pin"``...) of the options ``argv`` gives, defaults left out.
+
+    >>> sorted(given_options(["beam.toml", "--E", "2e6", "--dt=0.01", "--pin", "-1,0,0,1,1,1"]))
+    ['E', 'dt', 'pin']
+    """
+    parser = build_parser()
+    for action in parser._actions:  # argparse's list of options: parse again with every default suppressed
+        action.default = argparse.SUPPRESS
+    return set(vars(parser.parse_args(joined_vectors(argv)))) - {"input"}
 
 
 def region_materials(texts) -> dict:

@@ -6,19 +6,166 @@ in ``--units``) -> :func:`load_mesh` -> :func:`build_model` (material, stiffness
 ``--model`` (:mod:`volspring.ladder`), with a material per region tag of the mesh file for ``--region-material``
 (:func:`meshing.mesh_io.read_tet_regions`). Bad values raise
 :class:`~volspring.cli._arguments.InputError` or ValueError, naming the option and the value.
+
+A scene file INPUT (``*.toml``) takes the other road: :func:`read_scene_file` (the file, the flags given,
+``--set``) -> :func:`volspring.scene_file.assemble_scene`; :func:`build_run` is where the two meet.
 """
 
 from __future__ import annotations
 
 import warnings
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from volspring.cli._arguments import DEFAULT_NU, InputError, region_materials
+from volspring.cli._arguments import (BODY_FLAGS, DEFAULT_NU, RUN_FLAGS, SCENE_SUFFIX, InputError, given_options,
+                                      region_materials)
 
-__all__ = ["anchored_surface", "build_model", "build_scene", "gravity_vector", "load_mesh", "pinned_nodes",
-           "model_record", "tet_regions"]
+__all__ = ["BuiltRun", "anchored_surface", "build_model", "build_run", "build_scene", "gravity_vector",
+           "is_scene_file", "load_mesh", "pinned_nodes", "model_record", "read_scene_file", "scene_with_flags",
+           "tet_regions"]
+
+
+class BuiltRun(NamedTuple):
+    """What a run steps, from the flags or from a scene file."""
+
+    origin: str  # where the body (bodies) came from, for the summary
+    model: object
+    record: dict  # the model's description, for the manifest
+    summary_record: dict | None  # the same for the summary's model line (one body), or None
+    scene: object
+    integrator: object
+    state: object  # the initial state
+
+
+def build_run(args, note=None) -> BuiltRun:
+    """Mesh, model, scene, integrator and initial state of the flags, or of ``args.scene`` (a resolved scene
+    file); ``note(key, value)`` records the model (and the scene) in the run manifest."""
+    from volspring.integrators import make_integrator
+
+    note = note or (lambda key, value: None)
+    if args.scene is None:
+        body, origin = load_mesh(args)  # a TetMesh, or a SpringTopology with shells
+        model = build_model(args, body)
+        record = model_record(args, model)
+        note("model", record)
+        scene = build_scene(args, model)
+        integrator = make_integrator(args.integrator, **({"newton_iterations": args.newton_iterations}
+                                                         if args.newton_iterations else {}))
+        return BuiltRun(origin, model, record, record, scene, integrator, scene.initial_state())
+    from volspring.scene_file import assemble_scene
+
+    note("scene", args.scene)
+    built = assemble_scene(args.scene, base=Path(args.input).parent)
+    for index in args.ignored_nu:  # after the materials are checked: no warning about a value then refused
+        warnings.warn(f"bodies[{index}].material.nu = {args.scene['bodies'][index]['material']['nu']:g} is ignored "
+                      "by model \"springs\": pure springs have one effective Poisson ratio whatever nu is asked (the "
+                      "Cauchy limit); model \"smoothed\" honours nu (springs+volume too, for nu from about 0.25)",
+                      UserWarning, stacklevel=2)
+    records = [_body_record(spec) for spec in args.scene["bodies"]]
+    element_sets = [_described(element_set) for element_set in built.model.elements]
+    if len(records) == 1:
+        record = {**records[0], "element_sets": element_sets}
+        origin = built.origins[0]
+    else:
+        record = {"rung": built.model.rung, "bodies": records, "element_sets": element_sets}
+        origin = f"{args.input}, {len(records)} bodies (" + "; ".join(
+            f"{spec.get('name') or index}: {where}" for index, (spec, where) in
+            enumerate(zip(args.scene["bodies"], built.origins))) + ")"
+    note("model", record)
+    return BuiltRun(origin, built.model, record, record if len(records) == 1 else None, built.scene,
+                    built.integrator, built.state)
+
+
+def _body_record(spec) -> dict:
+    """The model record of one body of a scene file, as :func:`model_record` gives it for the flags."""
+    from volspring.ladder import DEFAULT_ALPHA
+
+    record = {"rung": spec["model"], **spec["material"], "damping_ratio": spec["damping_ratio"]}
+    if spec["model"] == "smoothed":
+        record["alpha"] = spec.get("alpha", DEFAULT_ALPHA)
+    else:
+        record["rule"] = spec.get("rule") or "van_gelder"
+        if "stiffness" in spec:
+            record["stiffness"] = spec["stiffness"]
+    return record
+
+
+# ---------------------------------------------------------------------- a scene file
+def is_scene_file(text) -> bool:
+    """Whether INPUT names a scene file (``*.toml``, any case)."""
+    return Path(str(text)).suffix.lower() == SCENE_SUFFIX
+
+
+def read_scene_file(args, argv) -> dict:
+    """The resolved scene of INPUT: the file, then the flags ``argv`` gives (:func:`scene_with_flags`),
+    then ``--set``; the run's values (step, duration, folder...) are copied onto ``args``."""
+    from volspring.scene_file import load_toml, parse_assignment, resolve_scene, set_value
+
+    raw = load_toml(args.input)
+    scene_with_flags(raw, args, given_options(argv))
+    for text in args.set:
+        set_value(raw, *parse_assignment(text))
+    scene = resolve_scene(raw)
+    _copy_run_values(args, scene)
+    # A nu the file gives to a pure-spring body (its resolved nu is filled in either way), for build_run to say so.
+    args.ignored_nu = [index for index, body in enumerate(raw["bodies"]) if "nu" in body.get("material", {})
+                       and scene["bodies"][index]["model"] == "springs"]
+    return scene
+
+
+def scene_with_flags(raw, args, given) -> None:
+    """Apply the flags ``given`` (destinations, :func:`~volspring.cli._arguments.given_options`) to the
+    unresolved scene ``raw`` in place: body flags to its only body, run flags to their key paths
+    (:data:`~volspring.cli._arguments.BODY_FLAGS`, :data:`~volspring.cli._arguments.RUN_FLAGS`),
+    ``--gravity`` and ``--drag`` replace those fields, ``--pin`` replaces the supports."""
+    from volspring.scene_file import set_value
+
+    if "region_material" in given:
+        raise InputError("--region-material does not apply to a scene file (its bodies have one material each)")
+    body_flags = [dest for dest in BODY_FLAGS if dest in given]
+    if body_flags:
+        bodies = raw.get("bodies")
+        count = len(bodies) if isinstance(bodies, list) else 0
+        if count != 1:
+            flag = "--" + body_flags[0].replace("_", "-")
+            raise InputError(f"{flag} is ambiguous: {args.input} has {count} bodies; set one body's value with "
+                             f"--set bodies[N].{BODY_FLAGS[body_flags[0]]}=VALUE (N from 0)")
+        for dest in body_flags:
+            set_value(raw, f"bodies[0].{BODY_FLAGS[dest]}", getattr(args, dest))
+    for dest, key in RUN_FLAGS.items():
+        if dest in given:
+            value = getattr(args, dest)
+            if dest == "render_surface":
+                value = str(value.resolve())  # the scene's file names are relative to the scene file
+            set_value(raw, key, str(value) if isinstance(value, Path) else value)
+    fields = raw.get("fields", [])
+    if isinstance(fields, list) and ("gravity" in given or "drag" in given):
+        kept = [field for field in fields if not (isinstance(field, dict) and (
+            ("gravity" in given and field.get("type") == "gravity") or ("drag" in given and field.get("type") == "drag")))]
+        gravity = gravity_vector(args.gravity) if "gravity" in given else None
+        raw["fields"] = ([{"type": "gravity", "g": gravity.tolist()}] if gravity is not None else []) + kept + (
+            [{"type": "drag", "rate": args.drag}] if "drag" in given and args.drag else [])
+    if "pin" in given:
+        raw["supports"] = [{"type": "pin", "region": list(args.pin), "units": args.units}]
+
+
+def _copy_run_values(args, scene) -> None:
+    """The run's values of a resolved scene onto ``args``, where the run and the summary read them."""
+    integrator, output = scene["integrator"], scene["output"]
+    args.integrator, args.dt, args.guard = integrator["name"], integrator["dt"], integrator["guard"]
+    args.newton_iterations, args.runaway_factor = integrator["newton_iterations"], integrator.get("runaway_factor")
+    args.duration, args.frame_dt = scene["duration"], output["frame_dt"]
+    args.out = None if output.get("folder") is None else Path(output["folder"])
+    args.blender, args.checkpoint_every = output["blender"], output.get("checkpoint_every")
+    args.render_surface = None
+    if output.get("render_surface") is not None:
+        if len(scene["bodies"]) != 1:
+            raise InputError(f"output.render_surface is drawn in the units of its body; {args.input} has "
+                             f"{len(scene['bodies'])} bodies (one body only)")
+        args.render_surface = Path(args.input).parent / output["render_surface"]
+        args.units, args.scale = scene["bodies"][0]["units"], scene["bodies"][0].get("scale")
 
 
 def load_mesh(args):

@@ -84,7 +84,13 @@ class RunProgress:
 def run(args, where: RunProgress, argv) -> int:
     """Check, open the output folder, then build, run and report; the folder's manifest ends with the
     run's status (finished, failed, interrupted)."""
-    check_arguments(args)
+    args.scene = None
+    if _build.is_scene_file(args.input):  # a scene file: its values, the flags given and --set, checked
+        args.scene = _build.read_scene_file(args, argv)
+    elif args.set:
+        raise InputError(f"--set sets a value of a scene file; INPUT {args.input} is not one (*.toml)")
+    else:
+        check_arguments(args)
     if args.out is None:
         return _run_in(args, where, None)
     from volspring.output import RunFolder, check_output_folder
@@ -100,20 +106,13 @@ def run(args, where: RunProgress, argv) -> int:
 
 def _run_in(args, where: RunProgress, folder) -> int:
     from volspring.checkpoint import load_checkpoint, save_checkpoint
-    from volspring.integrators import make_integrator
     from volspring.simulate import simulate
 
     started = time.perf_counter()
-    body, origin = _build.load_mesh(args)  # a TetMesh, or a SpringTopology with shells
-    model = _build.build_model(args, body)
-    record = _build.model_record(args, model)
-    if folder is not None:
-        folder.note("model", record)
-    scene = _build.build_scene(args, model)
-    integrator = make_integrator(args.integrator, **({"newton_iterations": args.newton_iterations}
-                                                     if args.newton_iterations else {}))
+    built = _build.build_run(args, note=None if folder is None else folder.note)  # the flags, or the scene file
+    model, scene, integrator = built.model, built.scene, built.integrator
 
-    state, first_frame = scene.initial_state(), 0
+    state, first_frame = built.state, 0
     total_steps = max(int(math.ceil(args.duration / args.dt - 1e-9)), 0)
     if args.resume is not None:
         state = load_checkpoint(args.resume, scene=scene, integrator=integrator, dt=args.dt)
@@ -160,7 +159,8 @@ def _run_in(args, where: RunProgress, folder) -> int:
         folder.record(args.out / CHECKPOINT_NAME)
         save_checkpoint(args.out / CHECKPOINT_NAME, result.state, scene=scene, integrator=integrator, dt=args.dt)
     if not args.quiet:
-        summary(args, origin, model, scene, integrator, result, first_frame, time.perf_counter() - started, record)
+        summary(args, built.origin, model, scene, integrator, result, first_frame, time.perf_counter() - started,
+                built.summary_record)
     return 0
 
 

@@ -1,0 +1,297 @@
+"""From a resolved scene (:func:`volspring.scene_file.read_scene`) to the objects a run steps.
+
+The data path: ``bodies`` -> meshes (a file, or a built-in shape meshed by :func:`meshing.tetrahedralize`)
+-> :class:`~volspring.bodies.Body` -> :meth:`Model.from_bodies <volspring.Model.from_bodies>`; then
+``supports`` (regions as ``--pin`` takes them) -> :class:`~volspring.Pins`,
+:class:`~volspring.supports.Sliding`, :class:`~volspring.supports.Prescribed`; ``fields``,
+``obstacles`` and ``contact`` -> forces and obstacles -> :class:`~volspring.Scene`; ``integrator`` ->
+:func:`~volspring.integrators.make_integrator`. Nothing is re-implemented: a value the API refuses is
+refused with the API's message, prefixed with its key path (:func:`at`).
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from volspring.scene_file._keys import SceneFileError, joined
+
+__all__ = ["AssembledScene", "assemble_scene", "at"]
+
+
+@dataclass(frozen=True, eq=False)
+class AssembledScene:
+    """What a run of a scene file steps.
+
+    Attributes
+    ----------
+    bodies : tuple of Body
+        The bodies, in the file's order (body i is ``bodies[i]``, ``model.node_body == i``).
+    origins : tuple of str
+        Where each body's mesh came from, for messages.
+    model : Model
+    scene : Scene
+    state : State
+        The initial state, with the bodies' initial velocities.
+    integrator : Integrator
+    """
+
+    bodies: tuple
+    origins: tuple
+    model: object
+    scene: object
+    state: object
+    integrator: object
+
+
+@contextmanager
+def at(path: str):
+    """Re-raise a ValueError or TypeError of the API as a SceneFileError with the key path in front.
+
+    A message that starts with the name of the key (``nu = 0.7 is not in (-1, 0.5)``) becomes
+    ``bodies[1].material.nu = 0.7 is not in (-1, 0.5)``; any other gets ``path: `` in front.
+    """
+    try:
+        yield
+    except (ValueError, TypeError, FileNotFoundError) as error:
+        if isinstance(error, SceneFileError):
+            raise
+        text = str(error)
+        name = text.split(" ", 1)[0]
+        if text.startswith(path):  # the API already named it (bodies[0].translation = ...)
+            raise SceneFileError(text) from error
+        if name.isidentifier() and text[len(name):].startswith(" = "):
+            raise SceneFileError(f"{path}.{text}") from error
+        raise SceneFileError(f"{path}: {text}") from error
+
+
+def assemble_scene(scene: dict, *, base=".") -> AssembledScene:
+    """Build the model, scene, initial state and integrator of a resolved scene.
+
+    Parameters
+    ----------
+    scene : dict
+        A scene as :func:`volspring.scene_file.read_scene` returns it (checked, defaults filled in).
+    base : path-like
+        The folder mesh file names are relative to (the scene file's).
+
+    Raises
+    ------
+    SceneFileError
+        For a value the API refuses, a file that cannot be read, a region that selects no node; the
+        message starts with the key path.
+    """
+    from volspring.bodies import Body, initial_velocities
+    from volspring.material import Material
+    from volspring.model import Model
+    from volspring.scene import Scene
+
+    # The checks that need no mesh first: a wrong material or field costs no meshing.
+    materials = []
+    for index, spec in enumerate(scene["bodies"]):
+        with at(f"{joined('bodies', index)}.material"):
+            materials.append(Material(**spec["material"]))
+    forces = [_field(spec, joined("fields", index)) for index, spec in enumerate(scene["fields"])]
+    integrator = _integrator(scene["integrator"])
+
+    bodies, origins = [], []
+    for index, (spec, material) in enumerate(zip(scene["bodies"], materials)):  # a loop over bodies, not nodes
+        path = joined("bodies", index)
+        mesh, origin = _body_mesh(spec, path, Path(base))
+        with at(path):
+            bodies.append(Body(mesh, material, model=spec["model"], alpha=spec.get("alpha"),
+                               rule=spec.get("rule") or "van_gelder", stiffness=spec.get("stiffness"),
+                               damping_ratio=spec["damping_ratio"], translation=spec.get("translation", (0, 0, 0)),
+                               rotation=_rotation(spec.get("rotation")), velocity=spec.get("velocity", (0, 0, 0)),
+                               angular_velocity=spec.get("angular_velocity", (0, 0, 0)), name=spec.get("name", "")))
+        origins.append(origin)
+    model = _model(Model, bodies)
+
+    pins, supports = _supports(scene["supports"], model)
+    obstacles = []
+    for index, spec in enumerate(scene["obstacles"]):
+        obstacle, force = _obstacle(spec, joined("obstacles", index), model)
+        obstacles += [obstacle] if obstacle is not None else []
+        forces += [force] if force is not None else []
+    if "contact" in scene:
+        from volspring.collision import ContactForce
+
+        with at("contact"):
+            forces.append(ContactForce(model, **scene["contact"]))
+    with at("supports"):
+        built = Scene(model, forces=forces, pins=pins, supports=supports, obstacles=obstacles)
+    with at("bodies"):
+        state = built.initial_state(v=initial_velocities(bodies, model))
+    return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator)
+
+
+# ---------------------------------------------------------------------- bodies
+def _body_mesh(spec, path, base):
+    """(TetMesh or SpringTopology [m], origin) of a body's ``mesh`` file or ``shape``."""
+    from meshing.units import UNITS, length_factor
+
+    if "mesh" in spec:
+        from meshing import TetMesh
+        from meshing.topology_io import is_topology_path, read_topology
+
+        file = base / spec["mesh"]
+        if not file.is_file():
+            raise SceneFileError(f"{path}.mesh = {spec['mesh']!r}: no file at {file}")
+        read = read_topology if is_topology_path(file) else TetMesh.read
+        with at(f"{path}.mesh"):
+            return read(file, units=spec["units"], scale=spec.get("scale")), str(file)
+    from meshing.shapes import Shape, parse_shape
+    from meshing.tetrahedralize import tetrahedralize
+
+    with at(f"{path}.shape"):
+        shape = parse_shape(spec["shape"])
+    factor = length_factor(spec["units"], spec.get("scale"))
+    if factor != 1.0:
+        shape = Shape(shape.name, tuple(dimension * factor for dimension in shape.dimensions))
+    low, high = shape.bounds
+    # The default size is volspring-sim's: a tenth of the extent, at most half the smallest side.
+    size = (spec["size"] * UNITS[spec["units"]] if "size" in spec
+            else min(shape.extent / 10.0, float((high - low).min()) / 2.0))
+    try:
+        mesh = tetrahedralize(shape, size=size, method=spec["mesher"], seed=spec.get("seed"))
+    except ValueError as error:
+        raise SceneFileError(f"{path}: {error}") from error
+    except Exception as error:  # gmsh raises bare Exceptions
+        raise SceneFileError(f"{path}: meshing {shape.spec()} at size {size:g} m with {spec['mesher']} failed: "
+                             f"{error}") from error
+    return mesh, f"{shape.spec()} meshed by {spec['mesher']} at size {size:g} m"
+
+
+def _rotation(angles):
+    """(3, 3) rotation matrix of angles [deg] about x, then y, then z (fixed axes), or None."""
+    if angles is None:
+        return None
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_euler("xyz", angles, degrees=True).as_matrix()
+
+
+def _model(model_class, bodies):
+    """Model.from_bodies, naming the body whose options it refuses."""
+    try:
+        return model_class.from_bodies(bodies)
+    except (ValueError, TypeError) as error:
+        # Only on the error path: find the body by building each alone (the first refused one).
+        culprits = [index for index, body in enumerate(bodies) if len(bodies) == 1 or _refused(model_class, body)]
+        with at(joined("bodies", culprits[0]) if culprits else "bodies"):
+            raise error
+
+
+def _refused(model_class, body) -> bool:
+    try:
+        model_class.from_bodies([body])
+    except (ValueError, TypeError):
+        return True
+    return False
+
+
+# ---------------------------------------------------------------------- supports
+@dataclass(frozen=True, eq=False)
+class _Moving:
+    """Positions ``start + velocity t`` (p, 3) [m] of supported nodes, picklable for checkpoints."""
+
+    start: np.ndarray
+    velocity_vector: np.ndarray
+
+    def position(self, t) -> np.ndarray:
+        return self.start + self.velocity_vector * t
+
+    def velocity(self, t) -> np.ndarray:
+        return np.broadcast_to(self.velocity_vector, self.start.shape).copy()
+
+
+def _supports(specs, model):
+    """``(pins, supports)``: pins at rest (all of them, one Pins, as ``--pin``) and the others."""
+    from volspring.supports import Pins, Prescribed, Sliding
+
+    held, supports = np.zeros(model.node_count, dtype=bool), []
+    for index, spec in enumerate(specs):
+        path = joined("supports", index)
+        nodes = _support_nodes(spec, path, model)
+        motion = {}
+        if "displacement" in spec or "velocity" in spec:
+            start = model.rest_positions[nodes] + np.asarray(spec.get("displacement", (0, 0, 0)))
+            moving = _Moving(start, np.asarray(spec.get("velocity", (0, 0, 0)), dtype=np.float64))
+            motion = {"motion": moving.position, "velocity": moving.velocity}
+        with at(path):
+            if spec["type"] == "pin" and not motion:
+                held[nodes] = True
+            elif spec["type"] == "pin":
+                supports.append(Pins(nodes, **motion))
+            elif spec["type"] == "sliding":
+                supports.append(Sliding(nodes, spec["normal"]))
+            else:
+                supports.append(Prescribed(nodes, spec["components"], **motion))
+    return (Pins(np.flatnonzero(held)) if held.any() else None), supports
+
+
+def _support_nodes(spec, path, model) -> np.ndarray:
+    """(p,) int -- the nodes in any of the support's regions, of its body or of all."""
+    from meshing.units import UNITS
+    from volspring.regions import describe_bounds, parse_region
+
+    candidates = np.arange(model.node_count)
+    if "body" in spec:
+        if not 0 <= spec["body"] < model.body_count:
+            raise SceneFileError(f"{path}.body = {spec['body']} is not a body index in [0, {model.body_count - 1}]")
+        candidates = model.body_nodes(spec["body"])
+    points = model.rest_positions[candidates]
+    selected = np.zeros(len(candidates), dtype=bool)
+    for text in spec["region"]:
+        with at(f"{path}.region"):
+            inside = parse_region(text, unit=UNITS[spec["units"]], label=f"{path}.region").nodes(points)
+        if not inside.any():
+            where = f"bodies[{spec['body']}]" if "body" in spec else "the scene"
+            raise SceneFileError(f"{path}.region = {text!r} selects no node; {where} spans "
+                                 f"{describe_bounds(points)} m")
+        selected |= inside
+    return candidates[selected]
+
+
+# ---------------------------------------------------------------------- forces, obstacles, integrator
+def _field(spec, path):
+    from volspring import forces
+
+    classes = {"gravity": forces.Gravity, "drag": forces.Drag, "wind": forces.Wind,
+               "attractor": forces.PointAttractor, "repulser": forces.PointRepulser, "vortex": forces.Vortex}
+    options = {name: value for name, value in spec.items() if name != "type"}
+    with at(path):
+        return classes[spec["type"]](**options)
+
+
+def _obstacle(spec, path, model):
+    """``(obstacle, force)``: a projected HalfSpace, or a penalty ObstacleContactForce on one."""
+    from volspring import HalfSpace
+    from volspring.collision import ObstacleContactForce
+
+    penalty = {name: spec[name] for name in ("friction", "stiffness", "stiffness_factor", "damping_ratio")
+               if name in spec}
+    with at(path):
+        if spec["response"] == "projection":
+            extra = sorted(set(penalty) - {"friction"})
+            if extra:
+                raise SceneFileError(f"{path}.{extra[0]} applies to response = \"penalty\", not \"projection\"")
+            return HalfSpace(spec["point"], spec["normal"], restitution=spec.get("restitution", 0.0),
+                             friction=spec.get("friction", 0.0)), None
+        if "restitution" in spec:
+            raise SceneFileError(f"{path}.restitution applies to response = \"projection\" (a penalty contact's "
+                                 "bounce follows from its damping_ratio)")
+        return None, ObstacleContactForce(model, [HalfSpace(spec["point"], spec["normal"])], **penalty)
+
+
+def _integrator(spec):
+    from volspring.integrators import make_integrator
+
+    options = {name: spec[name] for name in ("solver", "rtol", "maxiter") if name in spec}
+    if spec["newton_iterations"]:  # as volspring-sim: the explicit schemes take no options at all
+        options["newton_iterations"] = spec["newton_iterations"]
+    with at("integrator"):
+        return make_integrator(spec["name"], **options)
