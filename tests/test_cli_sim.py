@@ -343,3 +343,19 @@ def test_stale_temporaries_of_a_killed_run_are_removed_by_the_next(tmp_path, cap
     status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", "--out", out, "--quiet")
     assert status == 0, err
     assert not stale.exists()
+
+
+def test_resuming_keeps_the_frames_before_the_checkpoint_whatever_the_time_drift(tmp_path):
+    """The PVD lists decimal times, the checkpoint the float that the steps added up to, which drifts from the
+    decimal by more than 1e-6 dt after some 3e5 steps (measured from 259,000 steps at dt 0.01 to 1e-4): the
+    frame at the checkpoint was then kept and written again, and the writer refused the duplicate."""
+    from types import SimpleNamespace
+
+    from volspring.cli._run import _frames_before
+    from volspring.output.paraview import write_pvd
+
+    write_pvd(tmp_path / "frame.pvd", [(0.0, "frame_0000.vtu"), (0.1, "frame_0001.vtu"), (0.2, "frame_0002.vtu")])
+    args = SimpleNamespace(out=tmp_path, dt=0.01)
+    drifted = 0.2 + 3e-8  # 3e-6 dt above the frame's decimal time
+    assert _frames_before(args, drifted) == 2
+    assert _frames_before(args, 0.2 - 3e-8) == 2

@@ -173,7 +173,9 @@ def _frames_before(args, t) -> int:
     pvd = args.out / f"{SERIES_NAME}.pvd"
     if not pvd.is_file():
         return 0
-    return sum(1 for time, _ in read_pvd(pvd) if time < t - 1e-6 * args.dt)
+    # Half a step: frames are at least a step apart, and the PVD lists decimal times while t is the float the
+    # steps added up to, which drifts from the decimal by more than 1e-6 dt after ~3e5 steps.
+    return sum(1 for time, _ in read_pvd(pvd) if time < t - 0.5 * args.dt)
 
 
 def _writers(args, model, first_frame, record):
