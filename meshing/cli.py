@@ -2,10 +2,14 @@
 
 Examples
 --------
-``volspring-mesh box:1,0.1,0.1 -o beam.vtu --size 0.025``
-``volspring-mesh bunny.obj -o bunny.msh --size 0.005 --method delaunay --seed 1 --shells 2 --shell-thickness 0.002``
-``volspring-mesh bunny_in_mm.stl --units mm -o bunny.vtu --size 5``  (5 mm tets; the mesh is written in metres)
-``volspring-mesh sphere:0.1 -o ball.vstopo.npz --size 0.02 --shells 1 --shell-thickness 0.005``
+``volspring mesh box:1,0.1,0.1 -o beam.vtu --size 0.025``
+``volspring mesh bunny.obj -o bunny.msh --size 0.005 --mesher delaunay --seed 1 --shells 2 --shell-thickness 0.002``
+``volspring mesh bunny_in_mm.stl --units mm -o bunny.vtu --size 5``  (5 mm tets; the mesh is written in metres)
+``volspring mesh sphere:0.1 -o ball.vstopo.npz --size 0.02 --shells 1 --shell-thickness 0.005``
+
+``volspring-mesh`` is the same command, and ``--output`` and ``--method`` the earlier spellings of ``--out``
+and ``--mesher``. The options, exit statuses and progress follow the convention of all of volspring's
+commands (:mod:`meshing._command_line`).
 
 Shells have no place in a tet mesh format. An output named ``*.npz`` (by convention ``NAME.vstopo.npz``)
 is written as a spring topology file (:mod:`meshing.topology_io`: the tet mesh with its shell nodes,
@@ -25,18 +29,19 @@ import time
 import warnings
 from pathlib import Path
 
+from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, Parser, Stopped, UsageError,
+                                   add_common_options, advance_to, error_line, progress_bar, progress_mode,
+                                   signals_as_exceptions, stdout_to_stderr)
+
 __all__ = ["main", "sidecar_path"]
 
 PROG = "volspring-mesh"
+#: The stages of the progress bar, in order.
+STAGES = ("read", "tetrahedralize", "shells", "quality", "write")
 
 
-class _UsageError(Exception):
-    pass
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # one line, not argparse's usage block
-        raise _UsageError(message)
+class _BadInput(ValueError):
+    """Bad input found before the meshing (exit status 2)."""
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -44,16 +49,17 @@ def _parser() -> argparse.ArgumentParser:
     from meshing.tetrahedralize import METHODS
     from meshing.units import add_unit_arguments
 
-    parser = _Parser(prog=PROG, description="Fill a closed surface or a built-in shape with tetrahedra.")
+    parser = Parser(prog=PROG, description="Fill a closed surface or a built-in shape with tetrahedra.")
     parser.add_argument("input", help=f"a surface file (stl, obj, ply, off, ...) or a shape such as box:1,0.1,0.1 "
                                       f"({', '.join(SHAPE_NAMES)})")
-    parser.add_argument("-o", "--output", required=True, type=Path,
+    parser.add_argument("-o", "--out", "--output", dest="out", required=True, type=Path, metavar="OUT",
                         help="the file to write; its extension names the format: a tet mesh (vtu, msh, xdmf, mesh, "
                              "...), or .npz (by convention NAME.vstopo.npz) for a spring topology file, the tet mesh "
                              "with its shells, which volspring-sim reads. With --shells and a tet mesh format the "
-                             "topology file is written beside the mesh too, as NAME.vstopo.npz")
+                             "topology file is written beside the mesh too, as NAME.vstopo.npz (--output: the earlier spelling)")
     parser.add_argument("--size", required=True, type=float, help="target tet edge length, in --units")
-    parser.add_argument("--method", choices=METHODS, default="gmsh", help="meshing backend (default gmsh)")
+    parser.add_argument("--mesher", "--method", dest="mesher", choices=METHODS, default="gmsh",
+                        help="meshing backend (--method: the earlier spelling)")
     parser.add_argument("--shells", type=int, default=0, metavar="N", help="number of virtual shell layers")
     parser.add_argument("--shell-thickness", type=float, default=None, metavar="T",
                         help="offset between layers, in --units")
@@ -62,7 +68,7 @@ def _parser() -> argparse.ArgumentParser:
                        scale_applies_to="the input (a file's coordinates, or a built-in shape's dimensions; not "
                                         "--size or --shell-thickness)")
     parser.add_argument("--seed", type=int, default=None, help="random seed (Delaunay lattice jitter, gmsh)")
-    parser.add_argument("--verbose", action="store_true", help="log the repairs and steps, and gmsh's output")
+    add_common_options(parser, progress="progress of the stages (read, tetrahedralize, shells, quality, write)")
     return parser
 
 
@@ -127,40 +133,63 @@ def _read_input(text: str, units: str, scale):
                                             f"{len(surface.faces)} faces{converted}")
 
 
-def _run(args) -> str:
+def _run(args, bar) -> str:
+    """Check, read, mesh, add shells, measure and write; returns the summary. Bad input raises
+    :class:`_BadInput` (exit status 2) before any meshing; a failure of the meshing or the write raises
+    anything else."""
     from meshing.quality import quality_summary
     from meshing.tetrahedralize import tetrahedralize
     from meshing.topology import SpringTopology
     from meshing.units import UNITS
 
-    file_format = _output_format(args.output, shells=args.shells > 0)
-    if args.scale is not None and not (math.isfinite(args.scale) and args.scale > 0):
-        raise ValueError(f"--scale = {args.scale} is not a finite number > 0")
-    if not args.size > 0:
-        raise ValueError(f"--size = {args.size} is not a positive length")
-    if args.shells < 0:
-        raise ValueError(f"--shells = {args.shells} is negative; expected a number of layers >= 0")
-    if args.shells and args.shell_thickness is None:
-        raise ValueError(f"--shells {args.shells} needs --shell-thickness")
-    size = args.size * UNITS[args.units]  # lengths on the command line are in --units, not scaled
-    body, surface_volume, described = _read_input(args.input, args.units, args.scale)
+    try:
+        file_format = _output_format(args.out, shells=args.shells > 0)
+        if args.scale is not None and not (math.isfinite(args.scale) and args.scale > 0):
+            raise ValueError(f"--scale = {args.scale} is not a finite number > 0")
+        if not args.size > 0:
+            raise ValueError(f"--size = {args.size} is not a positive length")
+        if args.shells < 0:
+            raise ValueError(f"--shells = {args.shells} is negative; expected a number of layers >= 0")
+        if args.shells and args.shell_thickness is None:
+            raise ValueError(f"--shells {args.shells} needs --shell-thickness")
+        size = args.size * UNITS[args.units]  # lengths on the command line are in --units, not scaled
+        advance_to(bar, 0, STAGES[0])
+        body, surface_volume, described = _read_input(args.input, args.units, args.scale)
+    except (ValueError, OSError) as error:
+        if isinstance(error.__cause__, ImportError):  # a missing package is not the input's fault
+            raise RuntimeError(str(error)) from error
+        raise _BadInput(str(error)) from error
+    advance_to(bar, 1, STAGES[1])
     start = time.perf_counter()
-    mesh = tetrahedralize(body, size=size, method=args.method, seed=args.seed, verbose=args.verbose)
+    try:
+        with stdout_to_stderr(args.verbose):  # gmsh's log on stderr, the summary alone on stdout
+            mesh = tetrahedralize(body, size=size, method=args.mesher, seed=args.seed, verbose=args.verbose)
+    except ValueError as error:  # the size for this body, a surface the mesher refuses: the input
+        raise _BadInput(str(error)) from error
+    except Exception as error:  # gmsh raises bare Exceptions
+        raise RuntimeError(f"meshing with {args.mesher} at size {size:g} m failed: {error}") from error
     elapsed = time.perf_counter() - start
+    advance_to(bar, 2, STAGES[2])
     if args.shells:
         from meshing.shells import add_shells
 
-        topology = add_shells(mesh, layers=args.shells, thickness=args.shell_thickness * UNITS[args.units])
+        try:
+            topology = add_shells(mesh, layers=args.shells, thickness=args.shell_thickness * UNITS[args.units])
+        except ValueError as error:
+            raise _BadInput(str(error)) from error
     else:
         topology = SpringTopology.from_mesh(mesh)
+    advance_to(bar, 3, STAGES[3])
     quality = quality_summary(mesh)
-    wrote = _write(args.output, file_format, mesh, topology, args.shells)
+    advance_to(bar, 4, STAGES[4])
+    wrote = _write(args.out, file_format, mesh, topology, args.shells)
+    advance_to(bar, 5, "done")
 
     relative = (mesh.volume - surface_volume) / surface_volume
     springs = ", ".join(f"{count} {kind}" for kind, count in topology.kind_counts().items() if count)
     lines = [
         f"input: {described}",
-        f"method: {args.method}, size {size:g} m" + (f", seed {args.seed}" if args.seed is not None else "")
+        f"mesher: {args.mesher}, size {size:g} m" + (f", seed {args.seed}" if args.seed is not None else "")
         + f" ({elapsed:.2f} s)",
         f"nodes: {mesh.node_count} mesh" + (f" + {topology.shell_node_count} shell in {args.shells} layer(s)"
                                             if args.shells else ""),
@@ -199,32 +228,54 @@ def _write(output: Path, file_format, mesh, topology, shells: int) -> str:
 
 
 def main(argv=None) -> int:
-    """Run ``volspring-mesh`` with ``argv`` (default: the command line); returns the exit code.
+    """Run ``volspring mesh`` (``volspring-mesh``) with ``argv`` (default: the command line); returns the exit
+    status.
 
-    Bad input prints one line ``volspring-mesh: error: ...`` on stderr and returns 2 (usage) or 1
-    (anything else); no output file is left behind. The output's folder and format are checked
-    before anything is read or meshed. Warnings (such as a body read in metres that is over 10 m
-    across) print one line each, ``volspring-mesh: warning: ...``, on stderr.
+    0 done; 2 a bad command line or bad input (a value, the input file, an output that cannot be written
+    there), found before any meshing, with one line ``volspring-mesh: error: ...`` on stderr; 1 the meshing or
+    the write failed (one line too); 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP. No output file is left behind on
+    failure. Warnings (such as a body read in metres that is over 10 m across) print one line each,
+    ``volspring-mesh: warning: ...``, on stderr; progress and, with ``-v``, the log and gmsh's output go to
+    stderr too, the summary alone to stdout.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> main(["box:1,0.1,0.1", "-o", str(pathlib.Path(tempfile.mkdtemp()) / "beam.vtu"), "--size", "0.05", "-q"])
+    0
     """
     try:
         args = _parser().parse_args(argv)
-    except _UsageError as error:
-        print(f"{PROG}: error: {error}", file=sys.stderr)
-        return 2
+    except UsageError as error:
+        return error_line(PROG, error, EXIT_USAGE)
+    except SystemExit as done:  # --help, --version
+        return done.code if isinstance(done.code, int) else EXIT_DONE
     if args.verbose:
-        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s")
+        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
+    bar = progress_bar(progress_mode(args), total=len(STAGES), desc="mesh", unit="stages")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         try:
-            summary = _run(args)
-        except (ValueError, OSError, RuntimeError) as error:
+            with signals_as_exceptions():
+                summary = _run(args, bar)
+        except _BadInput as error:
+            bar.close()
             _print_warnings(caught)
-            message = " ".join(str(error).split())
-            print(f"{PROG}: error: {message}", file=sys.stderr)
-            return 1
+            return error_line(PROG, error, EXIT_USAGE)
+        except (ValueError, OSError, RuntimeError) as error:
+            bar.close()
+            _print_warnings(caught)
+            return error_line(PROG, error, EXIT_FAILED)
+        except (KeyboardInterrupt, Stopped) as stop:
+            bar.close()
+            name = stop.signal_name if isinstance(stop, Stopped) else "SIGINT (Ctrl-C)"
+            print(f"{PROG}: interrupted by {name}; no output file was left behind", file=sys.stderr)
+            return stop.status if isinstance(stop, Stopped) else EXIT_INTERRUPTED
+    bar.close()
     _print_warnings(caught)
-    print(summary)
-    return 0
+    if not args.quiet:
+        print(summary)
+    return EXIT_DONE
 
 
 def _print_warnings(caught) -> None:

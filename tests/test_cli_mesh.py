@@ -22,7 +22,7 @@ def test_builtin_shape_to_file(tmp_path, capsys, suffix):
 
 def test_bunny_with_delaunay_and_shells(shared_data, tmp_path, capsys):
     output = tmp_path / "bunny.vtu"
-    code = main([str(shared_data / "coarse_bunny.obj"), "-o", str(output), "--size", "15", "--method", "delaunay",
+    code = main([str(shared_data / "coarse_bunny.obj"), "-o", str(output), "--size", "15", "--mesher", "delaunay",
                  "--seed", "1", "--shells", "1", "--shell-thickness", "0.5", "--units", "mm"])
     captured = capsys.readouterr()
     assert code == 0, captured.err
@@ -43,7 +43,7 @@ def test_bad_arguments(tmp_path, capsys, argv, fragment):
     output = tmp_path / "out.vtu"
     code = main([argv[0], "-o", str(output), *argv[1:]])
     err = capsys.readouterr().err
-    assert code != 0
+    assert code == 2  # a bad command line or bad input, found before the work
     assert err.startswith("volspring-mesh: error: ") and fragment in err
     assert err.count("\n") == 1  # one line
     assert list(tmp_path.iterdir()) == []  # nothing left behind, not even a temporary file
@@ -60,7 +60,7 @@ def test_bad_surface_files(tmp_path, capsys, write, name, fragment):
     source = tmp_path / name
     write(source)
     output = tmp_path / "out" / "mesh.vtu"
-    assert main([str(source), "-o", str(output), "--size", "0.1"]) == 1
+    assert main([str(source), "-o", str(output), "--size", "0.1"]) == 2  # bad input
     err = capsys.readouterr().err
     assert err.startswith("volspring-mesh: error: ") and fragment in err and err.count("\n") == 1
     assert not output.exists() and not output.parent.exists()
@@ -68,7 +68,7 @@ def test_bad_surface_files(tmp_path, capsys, write, name, fragment):
 
 def test_unknown_output_extension_is_refused_before_meshing(tmp_path, capsys):
     output = tmp_path / "mesh.foo"
-    assert main(["sphere:1", "-o", str(output), "--size", "1e-5"]) == 1  # meshing would fail too: it must not run
+    assert main(["sphere:1", "-o", str(output), "--size", "1e-5"]) == 2  # meshing would fail too: it must not run
     err = capsys.readouterr().err
     assert "cannot tell the mesh format of output" in err and "'.foo'" in err
     assert list(tmp_path.iterdir()) == []
@@ -78,7 +78,7 @@ def test_write_failure_leaves_nothing(tmp_path, capsys):
     # The output's parent is a file: the atomic write cannot even create its temporary file.
     blocker = tmp_path / "blocker"
     blocker.write_text("")
-    assert main(["sphere:0.5", "-o", str(blocker / "mesh.vtu"), "--size", "0.25"]) == 1
+    assert main(["sphere:0.5", "-o", str(blocker / "mesh.vtu"), "--size", "0.25"]) == 2  # found before meshing
     assert capsys.readouterr().err.startswith("volspring-mesh: error: ")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["blocker"]
 
@@ -101,7 +101,7 @@ def no_meshing(monkeypatch):
 def test_output_that_is_a_directory_fails_fast(tmp_path, capsys, no_meshing):
     output = tmp_path / "existing_dir.vtu"
     output.mkdir()
-    assert main(["sphere:0.5", "-o", str(output), "--size", "0.25"]) == 1
+    assert main(["sphere:0.5", "-o", str(output), "--size", "0.25"]) == 2
     err = capsys.readouterr().err
     assert err == f"volspring-mesh: error: output {output} is a directory; expected a mesh file to write\n"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["existing_dir.vtu"] and not any(output.iterdir())
@@ -111,14 +111,14 @@ def test_output_under_a_file_fails_fast(tmp_path, capsys, no_meshing):
     blocker = tmp_path / "blocker"
     blocker.write_text("")
     output = blocker / "sub" / "mesh.vtu"
-    assert main(["sphere:0.5", "-o", str(output), "--size", "0.25"]) == 1
+    assert main(["sphere:0.5", "-o", str(output), "--size", "0.25"]) == 2
     err = capsys.readouterr().err
     assert err == (f"volspring-mesh: error: cannot write output {output}: {blocker} is a file, "
                    f"not a directory\n")
 
 
 def test_unknown_output_extension_fails_fast(tmp_path, capsys, no_meshing):
-    assert main(["sphere:0.5", "-o", str(tmp_path / "mesh.foo"), "--size", "0.25"]) == 1
+    assert main(["sphere:0.5", "-o", str(tmp_path / "mesh.foo"), "--size", "0.25"]) == 2
     assert "cannot tell the mesh format of output" in capsys.readouterr().err
 
 
@@ -130,7 +130,7 @@ def test_unwritable_output_folder_fails_fast(tmp_path, capsys, no_meshing, monke
     monkeypatch.setattr(os, "access", lambda path, mode: False if str(path) == str(tmp_path) else
                         real_access(path, mode))
     output = tmp_path / "mesh.vtu"
-    assert main(["sphere:0.5", "-o", str(output), "--size", "0.25"]) == 1
+    assert main(["sphere:0.5", "-o", str(output), "--size", "0.25"]) == 2
     assert capsys.readouterr().err == (f"volspring-mesh: error: cannot write output {output}: "
                                        f"no permission to create files in {tmp_path}\n")
 
@@ -168,7 +168,7 @@ def test_missing_networkx_is_named(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(trimesh.repair, "nx", ExceptionWrapper(ModuleNotFoundError("No module named 'networkx'")))
     source = tmp_path / "box.stl"
     _box_with_one_face_reversed(source)
-    assert main([str(source), "-o", str(tmp_path / "box.vtu"), "--size", "0.5"]) == 1
+    assert main([str(source), "-o", str(tmp_path / "box.vtu"), "--size", "0.5"]) == 1  # the machine, not the input
     err = capsys.readouterr().err
     assert err.startswith("volspring-mesh: error: ") and err.count("\n") == 1
     assert "making the face winding consistent needs the package networkx (pip install networkx)" in err
@@ -212,6 +212,6 @@ def test_large_input_in_metres_warns_on_one_line(shared_data, tmp_path, capsys):
     (["--scale", "nan"], "scale = nan is not a finite number > 0"),
 ])
 def test_bad_units(tmp_path, capsys, argv, fragment, no_meshing):
-    assert main(["sphere:1", "-o", str(tmp_path / "out.vtu"), "--size", "0.5", *argv]) != 0
+    assert main(["sphere:1", "-o", str(tmp_path / "out.vtu"), "--size", "0.5", *argv]) == 2
     err = capsys.readouterr().err
     assert err.startswith("volspring-mesh: error: ") and fragment in err and err.count("\n") == 1

@@ -50,11 +50,33 @@ def test_a_run_writes_frames_surface_and_checkpoint(tmp_path, capsys, beam_file)
     assert "10 steps" in out and "6 frame(s)" in out and "springs" in out
 
 
-def test_progress_bar_goes_to_stderr(tmp_path, capsys, beam_file):
+def test_progress_in_a_log_is_plain_lines_on_stderr(tmp_path, capsys, beam_file):
+    # capsys's stderr is not a terminal: --progress gives lines (the first at once), never a carriage return.
+    status, out, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.02", "--progress", "--quiet")
+    assert (status, out, err) == (0, "", "")  # --quiet wins
     status, out, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.02", "--progress")
-    assert status == 0
-    assert "\r[" in err and "100.0%" in err and err.endswith("\n")
-    assert "\r" not in out
+    assert status == 0 and "\r" not in err and "\r" not in out and "sim:" not in out
+    lines = err.splitlines()
+    assert lines[0].startswith("sim:   0% 0/4 steps") and lines[-1].startswith("sim: 100% 4/4 steps")
+    assert "steps/s, t = 0.02 s, frame 2" in lines[-1] and len(lines) <= 3
+
+
+def test_progress_on_a_terminal_is_a_bar_with_rate_and_time_left(tmp_path, capsys, beam_file, monkeypatch):
+    import io
+    import sys
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    status = main([str(beam_file), *PIN_END, *FAST, "--duration", "0.02"])  # the default on a terminal: a bar
+    assert status == 0 and "\r" not in capsys.readouterr().out
+    drawn = terminal.getvalue()
+    assert drawn.startswith("\rsim:") and drawn.endswith("\n")
+    last = drawn.rstrip("\n").split("\r")[-1]
+    assert "100%|" in last and "4/4 steps [" in last and "<00:00" in last and "steps/s" in last
 
 
 def test_quiet_prints_nothing(tmp_path, capsys, beam_file):
@@ -101,26 +123,26 @@ def test_divergence_is_one_line_and_leaves_complete_frames(tmp_path, capsys, bea
 def test_guard_raise_stops_before_the_first_step(tmp_path, capsys, beam_file):
     status, _, err = run(capsys, beam_file, *PIN_END, "--E", "1e9", "--integrator", "symplectic_euler",
                          "--dt", "1e-3", "--duration", "0.01", "--guard", "raise", "--out", tmp_path)
-    assert status == 1 and len(err.splitlines()) == 1 and err.startswith("volspring-sim: error: ")
+    assert status == 2 and len(err.splitlines()) == 1 and err.startswith("volspring-sim: error: ")
     assert not (tmp_path / "frame.pvd").exists()
 
 
 @pytest.mark.parametrize("argv, status, message", [
-    (["missing.msh"], 1, "INPUT 'missing.msh' is neither a mesh file nor a built-in shape"),
-    (["blob:1,2"], 1, "unknown shape 'blob'"),
-    (["box:1,1,0"], 1, "lz = 0.0 is not a positive finite length"),
-    (["{mesh}", "--pin", "5,5,5,6,6,6"], 1, r"--pin 5,5,5,6,6,6 selects no node; the mesh spans \[0, 0.2\] x"),
-    (["{mesh}", "--pin", "1,1,1"], 1, "--pin '1,1,1' is not 6 finite numbers"),
-    (["{mesh}", "--pin", "0,0,0,-1,1,1"], 1, "xmin > xmax"),
-    (["{mesh}", "--nu", "0.5"], 1, "nu = 0.5 is not in"),
-    (["{mesh}", "--E", "-1"], 1, "E = -1.0 Pa is not > 0"),
-    (["{mesh}", "--dt", "0"], 1, "--dt = 0 s is not a finite number > 0"),
-    (["{mesh}", "--duration", "nan"], 1, "--duration = nan s"),
-    (["{mesh}", "--gravity", "0,0"], 1, "--gravity '0,0' is not 3 finite numbers"),
-    (["{mesh}", "--checkpoint-every", "2"], 1, "--checkpoint-every needs --out"),
-    (["{mesh}", "--rule", "uniform"], 1, "--rule uniform needs --stiffness"),
-    (["{mesh}", "--size", "0.1"], 1, "--size applies to built-in shapes only"),
-    (["{mesh}", "--resume", "nowhere.npz"], 1, "no checkpoint file at nowhere.npz"),
+    (["missing.msh"], 2, "INPUT 'missing.msh' is neither a mesh file nor a built-in shape"),
+    (["blob:1,2"], 2, "unknown shape 'blob'"),
+    (["box:1,1,0"], 2, "lz = 0.0 is not a positive finite length"),
+    (["{mesh}", "--pin", "5,5,5,6,6,6"], 2, r"--pin 5,5,5,6,6,6 selects no node; the mesh spans \[0, 0.2\] x"),
+    (["{mesh}", "--pin", "1,1,1"], 2, "--pin '1,1,1' is not 6 finite numbers"),
+    (["{mesh}", "--pin", "0,0,0,-1,1,1"], 2, "xmin > xmax"),
+    (["{mesh}", "--nu", "0.5"], 2, "nu = 0.5 is not in"),
+    (["{mesh}", "--E", "-1"], 2, "E = -1.0 Pa is not > 0"),
+    (["{mesh}", "--dt", "0"], 2, "--dt = 0 s is not a finite number > 0"),
+    (["{mesh}", "--duration", "nan"], 2, "--duration = nan s"),
+    (["{mesh}", "--gravity", "0,0"], 2, "--gravity '0,0' is not 3 finite numbers"),
+    (["{mesh}", "--checkpoint-every", "2"], 2, "--checkpoint-every needs --out"),
+    (["{mesh}", "--rule", "uniform"], 2, "--rule uniform needs --stiffness"),
+    (["{mesh}", "--size", "0.1"], 2, "--size applies to built-in shapes only"),
+    (["{mesh}", "--resume", "nowhere.npz"], 2, "no checkpoint file at nowhere.npz"),
     (["{mesh}", "--integrator", "leapfrog"], 2, "argument --integrator: invalid choice: 'leapfrog'"),
     (["{mesh}", "--dt", "fast"], 2, "argument --dt: invalid float value: 'fast'"),
     ([], 2, "the following arguments are required: INPUT"),
@@ -142,10 +164,10 @@ def test_resume_refuses_a_checkpoint_of_another_mesh(tmp_path, capsys, beam_file
     other = tmp_path / "other.vtu"
     cube_mesh((2, 1, 1), size=(0.2, 0.05, 0.05)).write(other)
     status, _, err = run(capsys, other, *PIN_END, *FAST, "--duration", "0.02", "--resume", tmp_path / "checkpoint.npz")
-    assert status == 1 and "holds 20 nodes, the model has 12" in err and len(err.splitlines()) == 1
+    assert status == 2 and "holds 20 nodes, the model has 12" in err and len(err.splitlines()) == 1
     status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01",
                          "--resume", tmp_path / "checkpoint.npz")
-    assert status == 1 and "already at --duration" in err
+    assert status == 2 and "already at --duration" in err
 
 
 def test_help_exits_zero(capsys):
@@ -167,12 +189,12 @@ def test_unreadable_mesh_files_give_one_error_line(tmp_path, capsys):
     (tmp_path / "garbage.vtu").write_text("not xml at all")
     # meshio prints and calls sys.exit on such a file; the CLI must still say one line and return.
     status, out, err = run(capsys, tmp_path / "garbage.vtu")
-    assert status == 1 and out == "" and len(err.splitlines()) == 1
+    assert status == 2 and out == "" and len(err.splitlines()) == 1
     assert err.startswith(f"volspring-sim: error: cannot read {tmp_path / 'garbage.vtu'}")
     surface = tmp_path / "triangle.obj"
     surface.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     status, out, err = run(capsys, surface)
-    assert status == 1 and len(err.splitlines()) == 1 and "no tetra cells (found triangle)" in err
+    assert status == 2 and len(err.splitlines()) == 1 and "no tetra cells (found triangle)" in err
 
 
 def test_render_surface_is_anchored_in_file_order(tmp_path, capsys, beam_file):
@@ -188,7 +210,7 @@ def test_render_surface_is_anchored_in_file_order(tmp_path, capsys, beam_file):
     assert samples.shape == (2, 4, 3)
     np.testing.assert_array_equal(samples[0], vertices.astype(np.float32))  # frame 0 is the rest shape
     status, _, err = run(capsys, beam_file, "--render-surface", surface, "--out", out_dir)
-    assert status == 1 and "--render-surface needs --blender" in err
+    assert status == 2 and "--render-surface needs --blender" in err
 
 
 def test_nu_given_to_a_pure_spring_rule_says_it_is_ignored(tmp_path, capsys, beam_file):
@@ -224,7 +246,7 @@ def test_resume_with_another_run_is_refused_naming_what_differs(tmp_path, capsys
         argv = [*common[:1], *(common[1:3] if "--pin" not in extra else []), *common[3:], "--duration", "0.02",
                 "--resume", checkpoint, *extra]
         status, _, err = run(capsys, *argv)
-        assert status == 1 and len(err.splitlines()) == 1, err
+        assert status == 2 and len(err.splitlines()) == 1, err
         assert re.search(message, err), err
 
 
@@ -235,7 +257,7 @@ def test_resume_with_another_run_is_refused_naming_what_differs(tmp_path, capsys
 ])
 def test_solver_knobs_refuse_nonsense(capsys, beam_file, argv, message):
     status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.01", *argv)
-    assert status == 1 and re.search(message, err), err
+    assert status == 2 and re.search(message, err), err
 
 
 def test_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, beam_file, monkeypatch):
@@ -245,9 +267,9 @@ def test_out_that_is_a_file_is_refused_before_any_work(tmp_path, capsys, beam_fi
     target.write_text("not a folder")
     monkeypatch.setattr(volspring.cli._build, "load_mesh", lambda args: pytest.fail("meshed before checking --out"))
     status, _, err = run(capsys, beam_file, "--out", target)
-    assert status == 1 and f"--out {target} is an existing file, expected a folder" in err
+    assert status == 2 and f"--out {target} is an existing file, expected a folder" in err
     status, _, err = run(capsys, beam_file, "--out", target / "below")
-    assert status == 1 and f"{target} is a file, not a folder" in err
+    assert status == 2 and f"{target} is a file, not a folder" in err
 
 
 @pytest.mark.parametrize("signal_name, status", [("SIGTERM", 143), ("SIGINT", 130)])
@@ -321,7 +343,7 @@ def test_a_new_run_into_an_earlier_runs_folder_needs_overwrite_and_removes_only_
     (out / "my_notes.txt").write_text("mine")  # a user's file beside the outputs
     # A shorter run into the same folder: refused without --overwrite, naming the folder and the flag.
     status, _, err = run(capsys, *common, "--duration", "0.03")
-    assert status == 1 and len(err.splitlines()) == 1 and str(out) in err and "--overwrite" in err
+    assert status == 2 and len(err.splitlines()) == 1 and str(out) in err and "--overwrite" in err
     assert (out / "frame_0010.vtu").exists()  # nothing touched
     status, _, err = run(capsys, *common, "--duration", "0.03", "--overwrite")
     assert status == 0, err
@@ -359,3 +381,4 @@ def test_resuming_keeps_the_frames_before_the_checkpoint_whatever_the_time_drift
     drifted = 0.2 + 3e-8  # 3e-6 dt above the frame's decimal time
     assert _frames_before(args, drifted) == 2
     assert _frames_before(args, 0.2 - 3e-8) == 2
+

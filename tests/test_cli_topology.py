@@ -82,14 +82,14 @@ def test_a_failed_mesh_write_removes_the_topology_file_too(tmp_path, capsys, mon
         raise OSError("disk full")
 
     monkeypatch.setattr(TetMesh, "write", broken)
-    assert mesh_main([*BOX, *SHELLS, "-o", tmp_path / "beam.vtu"]) == 1
+    assert mesh_main([*BOX, *SHELLS, "-o", tmp_path / "beam.vtu"]) == 1  # the run failed while writing
     assert "volspring-mesh: error: disk full" in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []
 
 
 def test_a_sidecar_that_is_a_folder_is_refused_before_meshing(tmp_path, capsys):
     (tmp_path / "beam.vstopo.npz").mkdir()
-    assert mesh_main([*BOX, *SHELLS, "-o", tmp_path / "beam.vtu"]) == 1
+    assert mesh_main([*BOX, *SHELLS, "-o", tmp_path / "beam.vtu"]) == 2  # bad input: the output
     assert "beam.vstopo.npz: it is a directory" in capsys.readouterr().err
     assert [p.name for p in tmp_path.iterdir()] == ["beam.vstopo.npz"]
 
@@ -103,7 +103,7 @@ def test_sim_refuses_a_bad_topology_input_in_one_line(tmp_path, capsys, extra, d
     assert mesh_main([*BOX, *SHELLS, "-o", path]) == 0
     capsys.readouterr()
     damage(path)
-    assert sim_main([path, *PIN_END, "--duration", "0.01", *extra]) == 1
+    assert sim_main([path, *PIN_END, "--duration", "0.01", *extra]) == 2  # bad input
     err = capsys.readouterr().err
     assert err.startswith("volspring-sim: error: ") and message in err and err.count("\n") == 1
     assert str(path) in err or "--size" in message

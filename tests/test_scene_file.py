@@ -138,7 +138,7 @@ def test_flags_override_the_single_body_and_the_run_and_the_manifest_records_the
 
 def test_a_body_flag_is_refused_for_a_scene_of_several_bodies(capsys):
     status, _, err = run(capsys, BALL, "--E", "2e6", "--duration", "0")
-    assert status == 1
+    assert status == 2
     assert "--E is ambiguous" in err and "2 bodies" in err and "--set bodies[N].material.E=VALUE" in err
 
 
@@ -202,7 +202,7 @@ def test_a_mesh_file_body_relative_to_the_scene_file_in_millimetres(tmp_path, ca
 ])
 def test_bad_values_are_one_line_naming_the_key_path(capsys, override, message):
     status, out, err = run(capsys, BEAM, "--set", override, "--duration", "0")
-    assert status == 1 and out == ""
+    assert status == 2 and out == ""
     assert err.startswith("volspring-sim: error: ") and err.count("\n") == 1
     assert message in err, err
 
@@ -219,13 +219,13 @@ def test_bad_values_are_one_line_naming_the_key_path(capsys, override, message):
 def test_bad_scene_files_are_one_line_naming_the_key_path(tmp_path, capsys, text, message):
     (tmp_path / "scene.toml").write_text(text)
     status, _, err = run(capsys, tmp_path / "scene.toml", "--duration", "0")
-    assert status == 1 and err.count("\n") == 1
+    assert status == 2 and err.count("\n") == 1
     assert message in err, err
 
 
 def test_set_needs_a_scene_file(capsys):
     status, _, err = run(capsys, "box:0.2,0.05,0.05", "--set", "duration=0")
-    assert status == 1 and "--set sets a value of a scene file" in err
+    assert status == 2 and "--set sets a value of a scene file" in err
 
 
 def test_the_readme_scene_runs_and_its_bodies_land_on_the_plane(tmp_path, capsys):

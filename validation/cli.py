@@ -5,15 +5,19 @@ Examples
 --------
 Everything, on coarse meshes, in about half a minute (the held-out shapes only in the full run)::
 
-    volspring-validate --quick --out validation-report
+    volspring validate --quick --out validation-report
 
 Your own mesh, clamped at its lowest z, under gravity, on every rung of the ladder::
 
-    volspring-validate --mesh part.vtu --clamp zmin --E 2e6 --nu 0.4 --density 1100 --out part-report
+    volspring validate --mesh part.vtu --clamp zmin --E 2e6 --nu 0.4 --density 1100 --out part-report
 
-Only some rungs (``--model``, comma-separated; default all of :data:`volspring.ladder.MODELS`)::
+Only some rungs (``--model``, comma-separated; default all of :data:`volspring.ladder.MODELS`) and some
+spring stiffness rules (``--rule``, comma-separated; default all of :data:`validation.compare.RULES`)::
 
-    volspring-validate --quick --model springs,smoothed --out validation-report
+    volspring validate --quick --model springs,smoothed --rule van_gelder --out validation-report
+
+``volspring-validate`` is the same command; its options, exit statuses and progress follow the convention of
+all of volspring's commands (:mod:`meshing._command_line`).
 
 Writes ``OUT/report.html``, ``OUT/results.json`` and ``OUT/vtu/*.vtu``, and lists them in
 ``OUT/volspring-run.json`` (a :class:`volspring.output.RunFolder`). Running the same command again
@@ -22,15 +26,15 @@ folder holding another run's report, and on a non-empty folder that holds no ``v
 unless ``--overwrite`` is given (which removes only the files the old manifest lists, never anything
 else).
 
-Exit status: 0 success; 1 a failure while computing or writing; 2 bad input, found before any
-work (options, the mesh, the output and cache folders), with one line ``volspring-validate: error:
-...``; 130 on Ctrl-C and 143 on SIGTERM (129 on SIGHUP), with one line ``volspring-validate:
-interrupted by SIGTERM; ...``, no temporary file left and the run marked interrupted in its manifest.
+Exit status: 0 done; 1 a failure while computing or writing (the output folder that cannot be set up
+included); 2 a bad command line or bad input, found before any work (options, the mesh, the output and
+cache folders), with one line ``volspring-validate: error: ...``; 3 a simulation of a study diverged;
+130 on Ctrl-C and 143 on SIGTERM (129 on SIGHUP), with one line ``volspring-validate: interrupted by
+SIGTERM; ...``, no temporary file left and the run marked interrupted in its manifest.
 """
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import logging
 import sys
@@ -39,6 +43,8 @@ import warnings
 
 import numpy as np
 
+from meshing._command_line import (EXIT_DIVERGED, EXIT_DONE, EXIT_FAILED, EXIT_USAGE, Parser, UsageError,
+                                   add_common_options, advance_to, error_line, progress_bar, progress_mode)
 from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
 
 __all__ = ["main"]
@@ -46,45 +52,26 @@ __all__ = ["main"]
 PROG = "volspring-validate"
 
 
-class _Bar:
-    """A one-line progress bar on stderr, redrawn in place with a carriage return."""
-
-    def __init__(self, stream, *, width: int = 28, enabled: bool = True):
-        self.stream, self.width, self.enabled = stream, width, enabled
-        self.start = time.perf_counter()
-
-    def __call__(self, fraction: float, message: str) -> None:
-        if not self.enabled:
-            return
-        filled = int(round(self.width * fraction))
-        elapsed = time.perf_counter() - self.start
-        line = f"[{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:3.0f}% {elapsed:5.0f} s  {message}"
-        self.stream.write("\r" + line[:110].ljust(110))
-        self.stream.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            self.stream.write("\n")
-            self.stream.flush()
-
-
 def _parser():
     from validation.report import BUILT_IN, HELDOUT, STUDIES
     from meshing.units import add_unit_arguments
+    from validation.compare import RULES
     from validation.springs import VALIDATED_MODELS
 
-    parser = argparse.ArgumentParser(
-        prog=PROG, description="Compare the ladder of models (springs, springs+volume, smoothed) with linear-elastic "
-                               "FEM (scikit-fem, P2) on the same meshes and write report.html, results.json and "
-                               "VTU files.")
+    parser = Parser(
+        prog=PROG, description="Compare the ladder of models (springs, springs+volume, smoothed) with linear-elastic\n"
+                               "FEM (scikit-fem, P2) on the same meshes and write report.html, results.json and VTU "
+                               "files.")
     parser.add_argument("cases", nargs="*", metavar="CASE",
                         help=f"cases and studies to run: {', '.join(BUILT_IN + HELDOUT + STUDIES)} (default: all, "
                              "the held-out shapes not with --quick; only your mesh with --mesh)")
     parser.add_argument("--model", default=",".join(VALIDATED_MODELS), metavar="NAME[,NAME...]",
                         help=f"models to validate: the ladder's rungs and the lattice, {', '.join(VALIDATED_MODELS)} "
                              "(default: all)")
+    parser.add_argument("--rule", default=",".join(RULES), metavar="NAME[,NAME...]",
+                        help=f"spring stiffness rules to compare: {', '.join(RULES)} (default: all)")
     parser.add_argument("--quick", action="store_true", help="coarse meshes and short runs (about a minute)")
-    parser.add_argument("--out", required=True, metavar="DIR",
+    parser.add_argument("-o", "--out", required=True, metavar="DIR",
                         help="output folder; the same command run again replaces its report there")
     parser.add_argument("--overwrite", action="store_true",
                         help="replace the outputs of another run in --out (only the files its volspring-run.json "
@@ -102,8 +89,7 @@ def _parser():
                         help="gravity on --mesh [m/s^2] (default 0,0,-9.81)")
     parser.add_argument("--cache", metavar="DIR", help="FEM cache folder (default $VOLSPRING_CACHE or "
                                                        "~/.cache/volspring/fem)")
-    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log what is computed")
+    add_common_options(parser, progress="progress of the cases and studies on stderr")
     return parser
 
 
@@ -155,6 +141,7 @@ def _check(args):
         args.models = parse_models(args.model)
     except ValueError as error:
         raise _BadInput(f"--model {args.model!r}: {error}") from None
+    args.rules = _parse_rules(args.rule)
     if not args.nu < 0.5:
         raise _BadInput(f"--nu {args.nu:g} is not < 0.5 (nu = 0.5 is incompressible: the bulk modulus is infinite "
                         "and linear elasticity has no displacement-only solution)")
@@ -171,6 +158,17 @@ def _check(args):
     if args.scale is not None and not (np.isfinite(args.scale) and args.scale > 0):
         raise _BadInput(f"--scale {args.scale:g} is not a finite number > 0")
     _check_folders(args)
+
+
+def _parse_rules(text) -> tuple:
+    """Spring stiffness rules from ``"NAME[,NAME...]"``, in :data:`validation.compare.RULES`'s order, each once."""
+    from validation.compare import RULES
+
+    names = [name.strip() for name in text.split(",")]
+    unknown = [name for name in names if name not in RULES]
+    if unknown:
+        raise _BadInput(f"--rule {text!r}: unknown rule {unknown[0]!r}; known: {', '.join(RULES)} (comma-separated)")
+    return tuple(rule for rule in RULES if rule in names)
 
 
 def _check_folders(args) -> None:
@@ -192,19 +190,25 @@ def _check_folders(args) -> None:
 
 
 def _error(error, status: int) -> int:
-    message = " ".join(str(error).split())  # one line, whatever the message holds
-    print(f"{PROG}: error: {message}", file=sys.stderr)
-    return status
+    return error_line(PROG, error, status)
 
 
 def main(argv=None) -> int:
-    """Run ``volspring-validate``; returns the exit status (module docstring)."""
-    parser = _parser()
-    args = parser.parse_args(argv)
+    """Run ``volspring validate`` (``volspring-validate``); returns the exit status (module docstring)."""
+    try:
+        args = _parser().parse_args(argv)
+    except UsageError as error:
+        return _error(error, EXIT_USAGE)
+    except SystemExit as done:  # --help, --version
+        return done.code if isinstance(done.code, int) else EXIT_DONE
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, stream=sys.stderr,
                         format="%(levelname)s %(name)s: %(message)s")
     command = [PROG] + [str(word) for word in (sys.argv[1:] if argv is None else argv)]
-    bar = _Bar(sys.stderr, enabled=not args.no_progress)
+    bar = progress_bar(progress_mode(args), total=1.0, desc="validate", scale=True)
+
+    def progress(fraction, message):
+        advance_to(bar, min(max(float(fraction), 0.0), 1.0), str(message)[:60])
+
     run = None
     with handle_termination():
         try:
@@ -220,20 +224,22 @@ def main(argv=None) -> int:
                 run = RunFolder.open(args.out, command=command, overwrite=args.overwrite, replace_same_command=True,
                                      flags={"overwrite": "--overwrite"})
             except ValueError as error:  # _BadInput, RunFolderRefused, parse_region, Material, ...
-                return _error(error, 2)
+                return _error(error, EXIT_USAGE)
             except OSError as error:  # the folder was fine but could not be set up (a file that would not go)
-                return _error(error, 1)
+                return _error(error, EXIT_FAILED)
             with contextlib.suppress(OSError):  # leftovers of killed runs; a cache that cannot be cleaned still works
                 remove_stale_temporaries(args.cache or default_folder())
             start = time.perf_counter()
             with run:
                 try:
                     validate(args.out, cases=args.cases, quick=args.quick, own_case=own, models=args.models,
-                             folder=args.cache, progress=bar, command=command, record=run.record)
+                             rules=args.rules, folder=args.cache, progress=progress, command=command,
+                             record=run.record)
                 except (ValueError, ArithmeticError, RuntimeError, OSError) as error:
                     run.finish("failed")
                     bar.close()
-                    return _error(error, 2 if isinstance(error, ValueError) else 1)
+                    # The input was checked before the work: what fails now is the run (a diverged study: 3).
+                    return _error(error, EXIT_DIVERGED if isinstance(error, FloatingPointError) else EXIT_FAILED)
         except (KeyboardInterrupt, Interrupted) as stop:
             bar.close()
             if run is not None:
@@ -242,11 +248,13 @@ def main(argv=None) -> int:
             print(f"{PROG}: interrupted by {interruption_name(stop)}; {_left_behind(run)}", file=sys.stderr)
             return exit_status(stop)
     bar.close()
+    if args.quiet:
+        return EXIT_DONE
     replaced = f" (replacing the {len(run.removed)} file(s) of the previous run)" if run.removed else ""
     written = [f"{args.out}/report.html", f"{args.out}/results.json"]
     written += [f"{args.out}/vtu/"] if any(file.startswith("vtu/") for file in run.files) else []
     print(f"wrote {', '.join(written[:-1])} and {written[-1]} in {time.perf_counter() - start:.0f} s{replaced}")
-    return 0
+    return EXIT_DONE
 
 
 def _left_behind(run) -> str:

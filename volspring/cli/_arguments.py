@@ -1,8 +1,10 @@
 """The command line of ``volspring-sim``: its options, and the checks of their values before any work.
 
-The parser reports a bad command line by raising :class:`UsageError` (exit status 2) instead of
-printing its usage and exiting, and values that parse but make no sense raise :class:`InputError`
-(exit status 1), each reported by :func:`volspring.cli.main` in one line.
+The parser reports a bad command line by raising :class:`UsageError` instead of printing its usage
+and exiting, and values that parse but make no sense raise :class:`InputError`, both exit status 2,
+each reported by :func:`volspring.cli.main` in one line. The options every command has (``--version``,
+``-q``, ``-v``, ``--progress``), the exit statuses and the help layout are those of all of volspring's
+commands (:mod:`meshing._command_line`).
 """
 
 from __future__ import annotations
@@ -11,14 +13,18 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["BODY_FLAGS", "RUN_FLAGS", "InputError", "UsageError", "build_parser", "check_arguments", "given_options",
+from meshing._command_line import (EXIT_DIVERGED, EXIT_FAILED, EXIT_USAGE, Parser, UsageError,
+                                   add_common_options)
+
+__all__ = ["BODY_FLAGS", "EXIT_DIVERGED", "EXIT_FAILED", "EXIT_USAGE", "RUN_FLAGS", "InputError", "UsageError",
+           "build_parser", "check_arguments", "given_options",
            "joined_vectors", "region_materials"]
 
 PROG = "volspring-sim"
 CHECKPOINT_NAME = "checkpoint.npz"
 SERIES_NAME = "frame"
 SURFACE_NAME = "surface"
-EXIT_INPUT, EXIT_USAGE, EXIT_DIVERGED = 1, 2, 3
+EXIT_INPUT = EXIT_USAGE  # bad input, found before the run: the same status as a bad command line
 DEFAULT_NU = 0.45
 VECTOR_OPTIONS = ("--pin", "--gravity")  # values that may start with a minus sign (-0.1,-1,-1,... or -9.81)
 PIN_FORMS = ("XMIN,YMIN,ZMIN,XMAX,YMAX,ZMAX (a box; also box:...), xmin|xmax|ymin|ymax|zmin|zmax (a face of the "
@@ -39,17 +45,8 @@ RUN_FLAGS = {"integrator": "integrator.name", "dt": "integrator.dt", "guard": "i
              "checkpoint_every": "output.checkpoint_every"}
 
 
-class UsageError(Exception):
-    """A bad command line (argparse's complaint), reported in one line."""
-
-
 class InputError(Exception):
-    """Bad input found after parsing, reported in one line."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # argparse would print the usage and exit; we report one line
-        raise UsageError(message)
+    """Bad input found after parsing, reported in one line (exit status 2)."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -68,9 +65,8 @@ def build_parser() -> argparse.ArgumentParser:
     from volspring.output.run_folder import MANIFEST_NAME as MANIFEST
     from meshing.units import add_unit_arguments
 
-    parser = _Parser(prog=PROG, description="Simulate a volumetric soft body on a tetrahedral mesh, as a mass-spring "
-                                            "model or on an upper rung of the model ladder (--model).",
-                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser = Parser(prog=PROG, description="Simulate a volumetric soft body on a tetrahedral mesh, as a mass-spring "
+                                           "model or on an upper rung of the model ladder (--model).")
     parser.add_argument("input", metavar="INPUT",
                         help="a volume mesh file (.msh, .vtu, .mesh, ...), a spring topology file from "
                              "volspring-mesh (.vstopo.npz, any .npz: the tet mesh with its shells, which the model "
@@ -80,7 +76,8 @@ def build_parser() -> argparse.ArgumentParser:
     body = parser.add_argument_group("body")
     body.add_argument("--size", type=float, help="tet edge length for a built-in shape, in --units "
                                                  "(default: a tenth of its extent, at most half its smallest side)")
-    body.add_argument("--mesher", choices=("gmsh", "delaunay"), default="gmsh", help="mesher for a built-in shape")
+    body.add_argument("--mesher", "--method", dest="mesher", choices=("gmsh", "delaunay"), default="gmsh",
+                      help="mesher for a built-in shape (--method: volspring mesh's earlier spelling)")
     body.add_argument("--seed", type=int, help="random seed of the mesher")
     add_unit_arguments(body, applies_to="INPUT (a mesh file's coordinates or a shape's dimensions), --size, the --pin "
                                         "numbers and --render-surface", scale_applies_to="INPUT and --render-surface")
@@ -128,7 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
                           f"keeps growing over {RUNAWAY_CHECKS} checks (default {RUNAWAY_FACTOR:g}); 'inf' turns the "
                           "energy check off (NaN and Inf are always caught)")
     output = parser.add_argument_group("output")
-    output.add_argument("--out", type=Path, metavar="DIR",
+    output.add_argument("-o", "--out", type=Path, metavar="DIR",
                         help=f"write the frames there ({SERIES_NAME}.pvd: tets, {SERIES_NAME}_springs.pvd: springs, "
                              "for a model with springs)")
     output.add_argument("--blender", action="store_true",
@@ -147,9 +144,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="replace the outputs of an earlier run in DIR: only the files its manifest "
                              f"({MANIFEST}) lists are removed, never anything volspring did not write (without "
                              "it, a DIR holding another run's outputs, or files of unknown origin, is refused)")
-    output.add_argument("--progress", action=argparse.BooleanOptionalAction, default=None,
-                        help="progress bar on stderr (default: when stderr is a terminal)")
-    output.add_argument("-q", "--quiet", action="store_true", help="no progress bar and no summary")
+    add_common_options(parser.add_argument_group("terminal"), prog=PROG,
+                       progress="progress of the steps on stderr, with the simulated time and frame")
     scene_file = parser.add_argument_group("scene file")
     scene_file.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="set",
                             help=f"with a scene file INPUT (*{SCENE_SUFFIX}): set the value at a key path, VALUE read "

@@ -203,7 +203,8 @@ def load_mesh(args):
     size = (args.size * UNITS[args.units] if args.size is not None
             else min(shape.extent / 10.0, float((high - low).min()) / 2.0))
     try:
-        mesh = tetrahedralize(shape, size=size, method=args.mesher, seed=args.seed)
+        mesh = tetrahedralize(shape, size=size, method=args.mesher, seed=args.seed,
+                              verbose=getattr(args, "verbose", False))
     except ValueError:
         raise
     except Exception as error:  # gmsh raises bare Exceptions

@@ -9,17 +9,19 @@ resume it (:class:`RunProgress`).
 
 from __future__ import annotations
 
+import logging
 import math
 import shlex
 import sys
 import time
 import warnings
 
+from meshing._command_line import stdout_to_stderr
 from volspring.cli import _build
-from volspring.cli._arguments import (CHECKPOINT_NAME, EXIT_DIVERGED, EXIT_INPUT, EXIT_USAGE, PROG, SERIES_NAME,
+from volspring.cli._arguments import (CHECKPOINT_NAME, EXIT_DIVERGED, EXIT_FAILED, EXIT_USAGE, PROG, SERIES_NAME,
                                       SURFACE_NAME, InputError, UsageError, build_parser, check_arguments,
                                       joined_vectors)
-from volspring.cli._terminal import Progress, fail, progress_enabled, show_warning, summary
+from volspring.cli._terminal import Progress, fail, show_warning, summary
 
 __all__ = ["Diverged", "RunProgress", "main", "run"]
 
@@ -29,20 +31,24 @@ class Diverged(FloatingPointError):
 
 
 def main(argv=None) -> int:
-    """Run ``volspring-sim`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
+    """Run ``volspring sim`` (``volspring-sim``) with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
 
-    0 success, 1 bad input or a failed run, 2 a bad command line, 3 a diverged simulation, 130 Ctrl-C,
-    143 SIGTERM, 129 SIGHUP; every failure is one line on stderr.
+    0 done; 2 a bad command line or bad input (values, files, the output folder, a checkpoint that does
+    not fit, a step beyond an explicit integrator's limit with ``--guard raise``), found before the first
+    step; 1 the run failed while stepping or writing; 3 the simulation diverged; 130 Ctrl-C, 143 SIGTERM,
+    129 SIGHUP. Every failure is one line on stderr.
     """
-    from volspring.errors import SolverNotConverged
+    from volspring.errors import StepTooLarge
 
     argv = sys.argv[1:] if argv is None else [str(token) for token in argv]
     try:
         args = build_parser().parse_args(joined_vectors(argv))
     except UsageError as error:
         return fail(error, EXIT_USAGE)
-    except SystemExit as done:  # --help
+    except SystemExit as done:  # --help, --version
         return done.code if isinstance(done.code, int) else 0
+    if args.verbose:
+        logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
     from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
 
     where = RunProgress()
@@ -52,8 +58,11 @@ def main(argv=None) -> int:
             return run(args, where, argv)
     except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
         return fail(error, EXIT_DIVERGED)
-    except (InputError, ValueError, OSError, SolverNotConverged, Warning) as error:
-        return fail(error, EXIT_INPUT)
+    except (InputError, ValueError, OSError, RuntimeError, Warning) as error:  # RuntimeError: SolverNotConverged...
+        # Before the first step the input is at fault (a value, a file, the folder, the checkpoint); after it,
+        # the run. A step beyond the stability limit (--guard raise) is refused before the first step.
+        bad_input = isinstance(error, (InputError, StepTooLarge)) or not where.running
+        return fail(error, EXIT_USAGE if bad_input else EXIT_FAILED)
     except (KeyboardInterrupt, Interrupted) as stop:  # Ctrl-C, SIGTERM, SIGHUP: one line, no traceback
         print(f"{PROG}: interrupted by {interruption_name(stop)}{where.describe(argv)}", file=sys.stderr)
         return exit_status(stop)
@@ -65,6 +74,7 @@ class RunProgress:
     def __init__(self):
         self.state = None
         self.checkpoint = None  # (path, t) of the last checkpoint written
+        self.running = False  # the stepping has started: a failure from now on is the run's, not the input's
 
     def describe(self, argv) -> str:
         """`` at t = ... s (step k); the last checkpoint is ...; resume with: volspring-sim ...``."""
@@ -95,7 +105,10 @@ def run(args, where: RunProgress, argv) -> int:
         return _run_in(args, where, None)
     from volspring.output import RunFolder, check_output_folder
 
-    check_output_folder(args.out, label="--out")  # a file, below a file, not writable: before any work
+    try:
+        check_output_folder(args.out, label="--out")  # a file, below a file, not writable: before any work
+    except OSError as error:
+        raise InputError(str(error)) from None
 
     # Claimed before any work: a refused folder costs nothing, and every file is listed before it exists.
     folder = RunFolder.open(args.out, command=[PROG, *argv], overwrite=args.overwrite, resume=args.resume is not None,
@@ -109,7 +122,8 @@ def _run_in(args, where: RunProgress, folder) -> int:
     from volspring.simulate import simulate
 
     started = time.perf_counter()
-    built = _build.build_run(args, note=None if folder is None else folder.note)  # the flags, or the scene file
+    with stdout_to_stderr(args.verbose):  # with -v, gmsh's log (a shape meshed) on stderr, not in the summary
+        built = _build.build_run(args, note=None if folder is None else folder.note)  # the flags, or the scene file
     model, scene, integrator = built.model, built.scene, built.integrator
 
     state, first_frame = built.state, 0
@@ -127,7 +141,7 @@ def _run_in(args, where: RunProgress, folder) -> int:
 
     writers = _writers(args, model, first_frame, None if folder is None else folder.record)
     checks = {} if args.runaway_factor is None else {"runaway_factor": args.runaway_factor}
-    progress = Progress(enabled=progress_enabled(args), start=state.t, end=state.t + remaining * args.dt)
+    progress = Progress(args=args, first_step=state.step, last_step=total_steps)
     last = {"frames": 0, "state": state}
 
     def on_frame(frame_index, current):
@@ -141,8 +155,9 @@ def _run_in(args, where: RunProgress, folder) -> int:
             where.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
         last["frames"] += 1
         last["state"] = where.state = current
-        progress.update(current.t, first_frame + frame_index)
+        progress.update(current, first_frame + frame_index)
 
+    where.running = True
     try:
         result = simulate(scene, integrator, duration=remaining * args.dt, dt=args.dt, state=state,
                           frame_dt=args.frame_dt, callback=on_frame, guard=args.guard, **checks)

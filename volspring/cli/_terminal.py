@@ -1,4 +1,4 @@
-"""What ``volspring-sim`` writes on the terminal: one-line errors and warnings, the progress bar, the summary.
+"""What ``volspring sim`` writes on the terminal: one-line errors and warnings, the progress bar, the summary.
 
 Only the command line prints (the library logs and calls back); everything here writes to
 ``sys.stderr``, except the summary of a finished run, on ``sys.stdout``.
@@ -6,22 +6,19 @@ Only the command line prints (the library logs and calls back); everything here 
 
 from __future__ import annotations
 
-import math
 import sys
-import time
 
 import numpy as np
 
+from meshing._command_line import advance_to, error_line, progress_bar, progress_mode
 from volspring.cli._arguments import CHECKPOINT_NAME, PROG, SERIES_NAME, SURFACE_NAME
 
-__all__ = ["Progress", "fail", "progress_enabled", "show_warning", "summary"]
+__all__ = ["Progress", "fail", "show_warning", "summary"]
 
 
 def fail(message, status) -> int:
     """Print ``volspring-sim: error: MESSAGE`` on one line of stderr and return the exit ``status``."""
-    text = " ".join(str(message).split())  # one line, whatever the message holds
-    print(f"{PROG}: error: {text}", file=sys.stderr)
-    return status
+    return error_line(PROG, message, status)
 
 
 def show_warning(message, category, filename, lineno, file=None, line=None):
@@ -29,52 +26,30 @@ def show_warning(message, category, filename, lineno, file=None, line=None):
     print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
 
 
-def progress_enabled(args) -> bool:
-    """Whether to draw the progress bar: ``--progress``/``--no-progress``, else when stderr is a terminal."""
-    if args.quiet:
-        return False
-    return sys.stderr.isatty() if args.progress is None else args.progress
-
-
 class Progress:
-    """A one-line progress bar on stderr, redrawn with a carriage return at most 10 times a second.
+    """The steps of a run on stderr (tqdm, :func:`meshing._command_line.progress_bar`): on a terminal a bar with
+    the step rate and the time left, in a log a line every few seconds at most; the simulated time and frame
+    after it.
 
     Parameters
     ----------
-    enabled : bool
-        False draws nothing (keyword-only, as the others).
-    start, end : float
-        Simulated times [s] of 0% and 100%.
+    args : argparse.Namespace
+        ``--progress``/``--no-progress`` and ``--quiet`` (keyword-only, as the others).
+    first_step, last_step : int
+        The step counts of 0 % and 100 % (a resumed run starts past 0).
     """
 
-    WIDTH = 30
+    def __init__(self, *, args, first_step, last_step):
+        self.first_step = first_step
+        self.bar = progress_bar(progress_mode(args), total=max(last_step - first_step, 0), desc="sim", unit="steps")
 
-    def __init__(self, *, enabled, start, end):
-        self.enabled, self.start, self.end = enabled, start, end
-        self.drawn, self.width = False, 0
-        self.last_draw = -math.inf
-        self.clock = time.perf_counter()
-
-    def update(self, t, frame) -> None:
-        """Redraw for simulated time ``t`` [s] at frame number ``frame`` (throttled, except at 100%)."""
-        now = time.perf_counter()
-        done = 1.0 if self.end <= self.start else min(max((t - self.start) / (self.end - self.start), 0.0), 1.0)
-        if not self.enabled or (now - self.last_draw < 0.1 and done < 1.0):
-            return
-        filled = int(round(done * self.WIDTH))
-        bar = "#" * filled + "-" * (self.WIDTH - filled)
-        line = f"[{bar}] {100 * done:5.1f}%  t = {t:.4g} s  frame {frame}  {now - self.clock:.1f} s"
-        sys.stderr.write("\r" + line.ljust(self.width))  # padded over a longer previous line
-        self.width = len(line)
-        sys.stderr.flush()
-        self.drawn, self.last_draw = True, now
+    def update(self, state, frame) -> None:
+        """Move to ``state`` (its step count and time ``t`` [s]) at frame number ``frame``."""
+        advance_to(self.bar, state.step - self.first_step, f"t = {state.t:.4g} s, frame {frame}")
 
     def close(self) -> None:
         """End the bar's line, if one was drawn."""
-        if self.drawn:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
-            self.drawn = False
+        self.bar.close()
 
 
 def summary(args, origin, model, scene, integrator, result, first_frame, seconds, record=None) -> None:
