@@ -382,3 +382,14 @@ def test_resuming_keeps_the_frames_before_the_checkpoint_whatever_the_time_drift
     assert _frames_before(args, drifted) == 2
     assert _frames_before(args, 0.2 - 3e-8) == 2
 
+
+def test_blender_output_comes_with_its_import_script(tmp_path, capsys, beam_file):
+    """--blender writes surface_blender.py beside the OBJ and PC2: one Blender frame per frame written."""
+    import runpy
+
+    status, _, err = run(capsys, beam_file, *PIN_END, *FAST, "--duration", "0.03", "--out", tmp_path, "--blender",
+                         "--quiet")
+    assert status == 0, err
+    space = runpy.run_path(str(tmp_path / "surface_blender.py"), run_name="check")  # its main() needs Blender
+    assert (space["FPS"], space["FPS_BASE"]) == (100, 1.0)  # --frame-dt 0.01 s
+    assert space["frame_range"](space["read_cache_header"](tmp_path / "surface.pc2")[1]) == (1, 4)  # t = 0 .. 0.03

@@ -203,6 +203,8 @@ def _writers(args, model, first_frame, record):
         surface = (model if args.render_surface is None
                    else _build.anchored_surface(args.render_surface, model, args.units, args.scale))
         pc2 = args.out / f"{SURFACE_NAME}.pc2"
+        # A frame every step when --frame-dt is below --dt: the import script's fps is one per frame written.
         writers.append(BlenderWriter(args.out, surface, name=SURFACE_NAME,
-                                     first_frame=first_frame if pc2.is_file() else 0, record=record))
+                                     first_frame=first_frame if pc2.is_file() else 0, record=record,
+                                     frame_dt=max(args.frame_dt, args.dt)))
     return writers

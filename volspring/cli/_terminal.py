@@ -84,7 +84,7 @@ def summary(args, origin, model, scene, integrator, result, first_frame, seconds
     if args.out is not None:
         lines.append(f"output: {first_frame + result.frame_count} frame(s) in {args.out} ({SERIES_NAME}.pvd"
                      + (f", {SERIES_NAME}_springs.pvd" if model.spring_count else "")
-                     + (f", {SURFACE_NAME}_NNNN.obj, {SURFACE_NAME}.pc2" if args.blender else "")
+                     + (f", {SURFACE_NAME}_NNNN.obj, {SURFACE_NAME}.pc2, {SURFACE_NAME}_blender.py" if args.blender else "")
                      + (f", {CHECKPOINT_NAME}" if args.checkpoint_every else "") + ")")
     print("\n".join(lines))
 

@@ -13,6 +13,10 @@ Files in ``directory`` for a writer named ``NAME``:
     int32 point count, float32 start frame, float32 sample rate, int32 sample count, then float32
     x, y, z per point per sample (the layout Blender's Mesh Cache modifier reads, see
     ``MOD_meshcache_pc2.cc``).
+``NAME_blender.py``
+    with ``frame_dt=`` (the time between frames), Blender's import script: ``blender --python
+    NAME_blender.py`` opens the OBJ and the PC2 as an animated scene at the run's frame rate
+    (:mod:`volspring.output.blender_import`), written once the writer's first frame is in place.
 
 PC2 validity. The cache is created atomically with zero samples; each frame appends its
 samples, flushes them to disk, and only then rewrites the header's sample count. A reader
@@ -21,9 +25,11 @@ lie past the counted samples and are cut off by the next writer that resumes the
 keeps every frame of a run that crashes, where a temporary file renamed at the end would keep
 none, at the cost of one in-place header update per frame.
 
-In Blender: import ``NAME_0000.obj`` with Forward = Y, Up = Z (coordinates as they are, z up)
-and the vertex order kept, then add a Mesh Cache modifier reading ``NAME.pc2`` (its default
-axes, Forward Y and Up Z, match).
+Axes. Both files hold volspring's coordinates as they are: z up, metres, which are Blender's
+own axes. Blender's default OBJ import assumes y up and turns the object 90 degrees about X
+(gravity then points along +Y); import ``NAME_0000.obj`` with Forward = Y, Up = Z instead, the
+vertex order kept, and add a Mesh Cache modifier reading ``NAME.pc2`` (its default axes, Forward
+Y and Up Z, match) -- or run the import script, which does that.
 
 With ``record=`` (a :meth:`volspring.output.RunFolder.record`), the writer announces the files of
 each frame, in one call, before writing them: the run folder's manifest lists every file the run
@@ -41,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from meshing._io import atomic_path
+from volspring.output.blender_import import blender_frame_rate, import_script_path, write_import_script
 
 __all__ = ["BlenderWriter", "BoundarySurface", "read_pc2"]
 
@@ -58,9 +65,12 @@ class BoundarySurface:
 
     Parameters
     ----------
-    nodes : (p,) int64 -- the tet mesh nodes on the boundary, sorted
-    faces : (f, 3) int64 -- boundary triangles indexing ``nodes`` (outward normals)
-    node_count : int -- node count the deformed positions must have
+    nodes : (p,) int64
+        The tet mesh nodes on the boundary, sorted.
+    faces : (f, 3) int64
+        Boundary triangles indexing ``nodes`` (outward normals).
+    node_count : int
+        Node count the deformed positions must have.
     """
 
     nodes: np.ndarray
@@ -94,7 +104,18 @@ class BoundarySurface:
         return len(self.nodes)
 
     def deform(self, x) -> np.ndarray:
-        """(p, 3) float -- the surface vertices at node positions ``x`` (n, 3) [m]."""
+        """The surface vertices at node positions ``x``.
+
+        Parameters
+        ----------
+        x : (n, 3) float
+            Node positions [m].
+
+        Returns
+        -------
+        (p, 3) float
+            The positions of the surface's nodes [m].
+        """
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (self.node_count, 3):
             raise ValueError(f"x must have shape ({self.node_count}, 3), got {x.shape}")
@@ -107,12 +128,16 @@ def read_pc2(path):
     Parameters
     ----------
     path : path-like
+        The ``.pc2`` file.
 
     Returns
     -------
-    samples : (k, p, 3) float32 -- the points of each of the header's k samples [m]
-    start : float -- start frame
-    rate : float -- sample rate (frames per sample)
+    samples : (k, p, 3) float32
+        The points of each of the header's k samples [m].
+    start : float
+        Start frame.
+    rate : float
+        Sample rate (frames per sample).
     """
     path = Path(path)
     data = path.read_bytes()
@@ -134,19 +159,34 @@ class BlenderWriter:
 
     Parameters
     ----------
-    directory : path-like -- output folder, created if missing
-    surface : Anchor, BoundarySurface, TetMesh or Model -- what to write: anything with
-        ``deform(x) -> (p, 3)`` and ``faces`` ((k, 3) int or None); a TetMesh or Model
-        stands for its boundary surface
-    name : str -- file name prefix (see the module docstring)
-    obj : bool -- write the OBJ sequence (needs faces); default True
-    pc2 : bool -- write the PC2 cache; default True
-    start_frame : float -- PC2 start frame (Blender frame of the first sample), default 0
-    sample_rate : float -- PC2 frames per sample, default 1
-    first_frame : int -- resume an earlier run: keep its first ``first_frame`` samples and OBJ
-        files, and write the next frame as number ``first_frame``; 0 (default) starts afresh
-    record : callable, optional -- called as ``record(*paths)`` with the files of each frame (OBJ
-        and PC2) before they are written, such as :meth:`RunFolder.record`; default None
+    directory : path-like
+        Output folder, created if missing.
+    surface : Anchor, BoundarySurface, TetMesh or Model
+        What to write: anything with ``deform(x) -> (p, 3)`` and ``faces`` ((k, 3) int or
+        None); a TetMesh or Model stands for its boundary surface.
+    name : str
+        File name prefix (see the module docstring).
+    obj : bool
+        Write the OBJ sequence (needs faces); default True.
+    pc2 : bool
+        Write the PC2 cache; default True.
+    start_frame : float
+        PC2 header's start frame, default 0 (Blender's Mesh Cache in its frame mode ignores it;
+        the import script shows the first sample at frame 1).
+    sample_rate : float
+        PC2 header's frames per sample, default 1.
+    first_frame : int
+        Resume an earlier run: keep its first ``first_frame`` samples and OBJ files, and write
+        the next frame as number ``first_frame``; 0 (default) starts afresh.
+    record : callable, optional
+        Called as ``record(*paths)`` with the files of each frame (OBJ, PC2 and, at the
+        writer's first frame, the import script) before they are written, such as
+        :meth:`RunFolder.record`; default None.
+    frame_dt : float, optional
+        Time between frames [s] (``simulate``'s ``frame_dt``, or ``dt`` when every step is a
+        frame). Given, the writer also writes the import script ``NAME_blender.py`` with the
+        scene's frame rate ``1 / frame_dt`` (needs both ``obj`` and ``pc2``); default None
+        writes none.
 
     Examples
     --------
@@ -159,10 +199,17 @@ class BlenderWriter:
     >>> writer(0, State(mesh.points, 0 * mesh.points))
     >>> read_pc2(writer.pc2_path)[0].shape
     (1, 4, 3)
+
+    With the frame step, a script opens the frames in Blender (``blender --python DIR/frame_blender.py``):
+
+    >>> writer = BlenderWriter(tempfile.mkdtemp(), mesh, frame_dt=0.04)
+    >>> writer(0, State(mesh.points, 0 * mesh.points))
+    >>> sorted(path.name for path in writer.directory.iterdir())
+    ['frame.pc2', 'frame_0000.obj', 'frame_blender.py']
     """
 
     def __init__(self, directory, surface, *, name="frame", obj=True, pc2=True, start_frame=0.0,
-                 sample_rate=1.0, first_frame=0, record=None):
+                 sample_rate=1.0, first_frame=0, record=None, frame_dt=None):
         if not hasattr(surface, "deform"):
             surface = BoundarySurface.from_mesh(surface)
         self.surface = surface
@@ -184,6 +231,14 @@ class BlenderWriter:
             if not np.isfinite(value):
                 raise ValueError(f"{label} = {value} is not finite")
         self.start_frame, self.sample_rate = float(start_frame), float(sample_rate)
+        self.frame_dt = None
+        if frame_dt is not None:
+            if not (self.obj and self.pc2):
+                raise ValueError(f"frame_dt = {frame_dt!r} s is for the import script, which needs both the OBJ "
+                                 f"and the PC2 (got obj={self.obj}, pc2={self.pc2})")
+            self.frame_dt = float(frame_dt)
+            blender_frame_rate(self.frame_dt)  # refuses a step Blender cannot express, before any file
+        self._script_due = self.frame_dt is not None
         self.directory.mkdir(parents=True, exist_ok=True)
         self.frame_count = int(first_frame)
         if self.frame_count < 0:
@@ -201,14 +256,21 @@ class BlenderWriter:
     def obj_path(self, frame: int) -> Path:
         return self.directory / f"{self.name}_{frame:04d}.obj"
 
+    @property
+    def import_script_path(self):
+        """``NAME_blender.py``, Blender's import script, or None without ``frame_dt``."""
+        return None if self.frame_dt is None else import_script_path(self.directory, self.name)
+
     def frame_paths(self) -> list:
-        """The files the next frame writes or extends: its OBJ file and the PC2 cache.
+        """The files the next frame writes or extends: its OBJ file, the PC2 cache and, the first
+        time, the import script.
 
         Returns
         -------
         list of Path
         """
-        return ([self.obj_path(self.frame_count)] if self.obj else []) + ([self.pc2_path] if self.pc2 else [])
+        return (([self.obj_path(self.frame_count)] if self.obj else []) + ([self.pc2_path] if self.pc2 else [])
+                + ([self.import_script_path] if self._script_due else []))
 
     def _announce(self, *paths) -> None:
         if self._record is not None:
@@ -223,11 +285,13 @@ class BlenderWriter:
 
         Parameters
         ----------
-        state : State -- positions ``x`` (n, 3) [m]
+        state : State
+            Positions ``x`` (n, 3) [m] and time ``t`` [s].
 
         Returns
         -------
-        int -- the number of the frame written
+        int
+            The number of the frame written.
 
         Raises
         ------
@@ -250,9 +314,13 @@ class BlenderWriter:
                 # %.9g round-trips float32, the precision Blender keeps.
                 vertices = ("v %.9g %.9g %.9g\n" * len(points)) % tuple(points.ravel().tolist())
                 tmp.write_text(f"# volspring frame {self.frame_count}, t = {float(state.t)!r} s\n"
+                               f"# z up [m]: import with Forward Y, Up Z (Blender's default turns it on its side)\n"
                                + vertices + self._faces_text)
         if self.pc2:
             self._append_pc2(points)
+        if self._script_due:  # after the frame's files, so that the script never names a missing one
+            write_import_script(self.directory, name=self.name, frame_dt=self.frame_dt)
+            self._script_due = False
         self.frame_count += 1
         return self.frame_count - 1
 
