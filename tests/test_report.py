@@ -1,6 +1,9 @@
 """volspring-validate end to end: the three outputs, their numbers against a direct computation, bad input."""
 
+import base64
+import html
 import json
+import re
 
 import numpy as np
 import pytest
@@ -27,7 +30,7 @@ def test_quick_writes_the_three_outputs(quick_run):
     status, out = quick_run
     assert status == 0
     page = (out / "report.html").read_text()
-    assert page.count("data:image/png;base64,") >= 5  # profiles, refinement, volume, speed, Cauchy
+    assert page.count("data:image/svg+xml;base64,") >= 5  # profiles, refinement, volume, speed, Cauchy
     assert "<img" in page and 'src="http' not in page and "<script" not in page  # self-contained
     results = json.loads((out / "results.json").read_text())
     vtu = sorted(path.name for path in (out / "vtu").glob("*.vtu"))
@@ -114,6 +117,167 @@ def test_log_axes_label_major_ticks_only():
     plt.close(figure)
 
 
+# ---------------------------------------------------------------------- the page tells its story
+def page_and_results(quick_run):
+    _, out = quick_run
+    return (out / "report.html").read_text(encoding="utf-8"), json.loads((out / "results.json").read_text())
+
+
+def test_headline_says_which_model_and_integrator_give_which_error_at_what_cost(quick_run):
+    page, results = page_and_results(quick_run)
+    found = re.search(r'<p class="headline">(.*?)</p>', page, re.S)
+    assert found, "no headline paragraph"
+    sentence = html.unescape(found.group(1))
+    assert page.index('class="headline"') < page.index("<h2")  # on the first screen, above the ladder
+    # The rung with the smallest worst error (tip deflection of the static cases, first frequency of the modal
+    # one), its worst error and median cost as in results.json; the springs rung is the cheap end.
+    worst, costs = {}, {}
+    for row in results["ladder"]["rows"]:
+        if "refused" in row:
+            continue
+        error = row["frequency_errors"][0] if row["kind"] == "modes" else row["tip_deflection_error"]
+        worst[row["rung"]] = max(worst.get(row["rung"], 0.0), abs(error))
+        costs.setdefault(row["rung"], []).append(row["step_cost_vs_springs"])
+    best = min(worst, key=worst.get)
+    assert worst[best] >= 0.1  # the quick meshes are coarse: whole percents
+    assert f"the {best} rung is the most accurate model, within {100 * worst[best]:.0f}%" in sentence
+    assert f"at {np.median(costs[best]):.2g}× the springs rung's cost per implicit Euler step" in sentence
+    assert "the springs rung is the cheapest" in sentence and f"off by up to {100 * worst['springs']:.0f}%" in sentence
+    # The integrators: the cheapest stable run with its wall time per simulated second, and the cheapest run
+    # that keeps the first frequency within 1%.
+    stable = [run for run in results["studies"]["speed"]["runs"] if run["stable"]]
+    cheapest = min(stable, key=lambda run: run["wall_seconds_per_simulated_second"])
+    assert (f"{cheapest['integrator']} at {cheapest['step_factor']:g} × " in sentence
+            and f"is the cheapest stable integrator: {cheapest['wall_seconds_per_simulated_second']:.2g} s" in sentence)
+    keeping = [run for run in stable if run.get("first_frequency_error") is not None
+               and abs(run["first_frequency_error"]) <= 0.01]
+    faithful = min(keeping, key=lambda run: run["wall_seconds_per_simulated_second"])
+    assert (f"within 1% is {faithful['integrator']} at {faithful['step_factor']:g} × the critical step: "
+            f"{faithful['wall_seconds_per_simulated_second']:.2g} s per simulated second") in sentence
+
+
+def test_headline_branches():
+    """The sentence without a speed study, with one rung both best and cheapest, with no run keeping f1."""
+    from validation.report.summary import headline
+
+    rows = [{"case": "c", "title": "Case", "kind": "static", "rung": "smoothed", "tip_deflection_error": -0.05,
+             "step_cost_vs_springs": 0.9, "step_seconds": 2e-3},
+            {"case": "c", "title": "Case", "kind": "static", "rung": "springs", "tip_deflection_error": 0.5,
+             "step_cost_vs_springs": 1.0, "step_seconds": 2.2e-3},
+            {"case": "c", "title": "Case", "kind": "static", "rung": "springs+volume", "refused": "nu too low"}]
+    text = headline({"ladder": {"rows": rows}, "studies": {}})
+    assert text == ("Against FEM on the same meshes, the smoothed rung is the most accurate model, within 5% in tip "
+                    "deflection and first frequency (worst: case), and also the cheapest (2 ms per implicit Euler "
+                    "step).")
+    runs = [{"integrator": "rk4", "step_factor": 0.5, "step_unit": "critical step", "stable": True,
+             "wall_seconds_per_simulated_second": 3.0, "settled_deflection_error": 1e-6, "first_frequency_error": 0.02},
+            {"integrator": "explicit_euler", "step_factor": 0.2, "step_unit": "2 / omega_max", "stable": False,
+             "wall_seconds_per_simulated_second": 0.1}]
+    text = headline({"ladder": {"rows": []}, "studies": {"speed": {"node_count": 44, "runs": runs}}})
+    assert "rk4 at 0.5 × the critical step is the cheapest stable integrator: 3 s" in text
+    assert text.endswith("no run keeps the first frequency within 1%.")
+    assert headline({"ladder": {"rows": rows[:1]}, "studies": {}}) == (
+        "Against FEM on the same meshes, the smoothed rung is within 5% in tip deflection and first frequency "
+        "(worst: case), at 2 ms per implicit Euler step.")  # one rung: no "most accurate"
+    assert headline({"ladder": {"rows": []}, "studies": {}}) == ""
+
+
+def test_volume_change_is_a_ratio_to_fem(quick_run):
+    """-74% (compression) and +103% (tension) were the same failure: twice the change; now 1.74x and 2.03x."""
+    page, results = page_and_results(quick_run)
+    assert "volume change error" not in page and "volume vs FEM" not in page  # the old percent columns
+    ratios = 0
+    for row in results["ladder"]["rows"]:
+        if row.get("volume_change_error_vs_fem") is not None:
+            ratio = row["volume_change_m3"] / row["reference_volume_change_m3"]
+            assert f"<td>{ratio:#.3g}&times;</td>" in page
+            ratios += 1
+    assert ratios >= 8  # the hanging bar and the compressed cube, every rung
+    springs = {row["case"]: row for row in results["ladder"]["rows"] if row["rung"] == "springs"}
+    # The quick run's springs: about twice P2's change in both, whatever the sign of the error.
+    for case in ("hanging_bar", "uniaxial_compression"):
+        assert 1.5 < springs[case]["volume_change_m3"] / springs[case]["reference_volume_change_m3"] < 2.5
+    # The case tables and the rules table too, against P2 and against the closed form.
+    case = results["cases"]["hanging_bar"]
+    volume = case["springs"]["lloyd"]["volume_change_m3"]
+    assert f"<td>{volume / case['fem']['P2']['deformed_volume_change_m3']:#.3g}&times;</td>" in page
+    assert f"<td>{volume / case['analytic']['volume_change_m3']:#.3g}&times;</td>" in page
+    assert "hanging bar volume change / FEM" in page
+
+
+def test_bending_volume_change_is_not_meaningful_and_says_why(quick_run):
+    page, results = page_and_results(quick_run)
+    bending = [name for name, case in results["cases"].items() if case["kind"] != "modes"
+               and abs(case["fem"]["P2"]["volume_change_m3"])
+               < abs(case["fem"]["P2"]["deformed_volume_change_m3"] - case["fem"]["P2"]["volume_change_m3"])]
+    assert bending == ["cantilever_gravity", "cantilever_end_load"]
+    # One "not meaningful" per ladder row of a bending case and per answer in its case table, none elsewhere.
+    ladder_rows = [row for row in results["ladder"]["rows"] if row["case"] in bending and "refused" not in row]
+    answers = sum(len(results["cases"][name]["springs"])
+                  + sum("refused" not in values for values in results["cases"][name]["models"].values())
+                  for name in bending)
+    link = "<a class='na' href='#bending-volume'>not meaningful: bending</a>"
+    assert page.count(link) == len(ladder_rows) + answers
+    note = re.search(r"<p id='bending-volume'>(.*?)</p>", page, re.S)
+    assert note and "cancellation" in note.group(1) and "not of the material" in note.group(1)
+
+
+def test_quick_run_is_flagged_as_coarse(quick_run):
+    from validation.report.html import render_html
+
+    page, results = page_and_results(quick_run)
+    flag = re.search(r"<p class='quick-flag'>(.*?)</p>", page, re.S)
+    assert flag and "coarse" in flag.group(1) and "--quick" in flag.group(1)
+    assert page.index("quick-flag") < page.index("<h2")
+    full = render_html(dict(results, quick=False), {})
+    assert "<p class='quick-flag'>" not in full and "Quick run" not in full
+
+
+def test_contents_list_every_section_in_page_order(quick_run):
+    page, _ = page_and_results(quick_run)
+    contents = re.search(r"<nav class='contents[^>]*>(.*?)</nav>", page, re.S)
+    assert contents and page.index("<nav") < page.index("<h2")
+    listed = re.findall(r"<a href='#([^']+)'>", contents.group(1))
+    headings = re.findall(r"<h2 id='([^']+)'>", page)
+    assert listed == headings and len(headings) >= 10  # ladder, rules, Cauchy, five cases, two studies, files
+    assert listed[0] == "ladder"
+
+
+def test_figures_are_svg(quick_run):
+    page, _ = page_and_results(quick_run)
+    sources = re.findall(r'<img alt="[^"]*" src="([^"]+)"', page)
+    assert len(sources) >= 5 and "image/png" not in page
+    for source in sources:
+        prefix = "data:image/svg+xml;base64,"
+        assert source.startswith(prefix)
+        assert b"<svg" in base64.b64decode(source[len(prefix):])[:2000]
+
+
+def test_speed_points_are_labelled_with_their_step():
+    from validation.report.figures import render_figures
+
+    def run(integrator, factor, unit, wall, error):
+        return {"integrator": integrator, "step_factor": factor, "step_unit": unit, "stable": True,
+                "wall_seconds_per_simulated_second": wall, "settled_deflection_error": error,
+                "first_frequency_error": error}
+
+    speed = {"model_frequency_error": 0.3, "model_deflection_error": -0.6,
+             "runs": [run("rk4", 0.37, "critical step", 2.0, 1e-4), run("implicit_euler", 123.0, "2 / omega_max", 0.2, 0.3)]}
+    figures = render_figures({"cases": {}, "studies": {"speed": speed}, "rules": []})
+    svg = base64.b64decode(figures["speed"].split(",", 1)[1]).decode()
+    # Text drawn as paths keeps its string in a comment: each label once per panel.
+    assert svg.count("<!-- 0.37 -->") == 2 and svg.count("<!-- 123 -->") == 2
+    assert "rk4 (step in dt_crit)" in svg and "implicit_euler (step in 2/omega_max)" in svg
+
+
+def test_every_table_is_in_a_scrolling_wrapper(quick_run):
+    page, _ = page_and_results(quick_run)
+    tables = page.count("<table")
+    assert tables >= 10 and page.count("<div class='table-scroll") == tables
+    assert len(re.findall(r"<div class='table-scroll[^']*'><table", page)) == tables  # each wraps its table
+    assert re.search(r"\.table-scroll \{[^}]*overflow-x: auto", page)
+
+
 @pytest.mark.slow
 def test_full_run_writes_the_three_outputs(tmp_path):
     """The full run (no --quick), from an empty cache: about 90 s on 2 cores."""
@@ -122,7 +286,7 @@ def test_full_run_writes_the_three_outputs(tmp_path):
     assert status == 0
     results = json.loads((out / "results.json").read_text())
     assert results["quick"] is False
-    assert (out / "report.html").read_text().count("data:image/png;base64,") >= 5
+    assert (out / "report.html").read_text().count("data:image/svg+xml;base64,") >= 5
     assert (out / "vtu" / "cantilever_gravity.vtu").is_file()
     assert results["studies"]["refinement"]["levels"] == [1, 2, 3, 4]
     runs = results["studies"]["speed"]["runs"]

@@ -3,14 +3,14 @@
 The data path reads one way, one module per step::
 
     results, artefacts = run_validation(cases=..., quick=...)   # runner: cases and studies -> numbers
-    images = render_figures(results)                              # figures: matplotlib -> base64 PNG
-    page = render_html(results, images)                           # html: one self-contained page
+    images = render_figures(results)                              # figures: matplotlib -> SVG data URIs
+    page = render_html(results, images)                           # html: headline, contents, sections
     write_outputs(out, results, artefacts)                        # outputs: VTU, JSON, HTML, each atomic
 
 :func:`validate` does all of it (``volspring-validate`` calls it). :func:`run_validation` returns
 the results (plain JSON numbers, every key naming its unit; the layout is in
 :mod:`validation.report.runner`) with the arrays for figures and VTU files; :func:`write_outputs`
-writes ``DIR/report.html`` (self-contained: tables, matplotlib figures as base64 PNG),
+writes ``DIR/report.html`` (self-contained: the headline, tables, matplotlib figures as SVG),
 ``DIR/results.json`` and ``DIR/vtu/*.vtu``.
 """
 
