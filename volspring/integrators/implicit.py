@@ -38,7 +38,8 @@ still works. It is rebuilt at the start of a step when
 - dt differs from the build's dt by more than 25 %.
 
 What the policy reads is kept in ``state.memory`` (keys ``implicit_euler.*``): the last two
-velocity changes (CG starts from their linear extrapolation), the last iteration count, and the step, time, dt, positions and velocities at which the
+velocity changes (CG starts from their linear extrapolation while that guessed the last step better than
+the last change did, else from the last change), the last iteration count, and the step, time, dt, positions and velocities at which the
 hierarchy was built, so a run resumed from a checkpoint rebuilds the very same hierarchy from
 those positions and continues bit-identically.
 """
@@ -75,16 +76,25 @@ class ImplicitStepInfo:
 
     Parameters
     ----------
-    iterations : int -- CG iterations of the linearised solve (0 for the direct solver)
-    residual : float -- its relative residual [-]
-    solves : tuple of SolveInfo -- the linearised solve, then one per Newton iteration
-    newton_residuals : (k + 1,) float -- ||M (v1 - v0) - h F(x1, v1, t + h)|| over the free
-        nodes [N s] after the linearised solve and after each Newton iteration
-    forces_seconds : float -- spring forces with their Jacobian blocks (one pass) and scene forces [s]
-    assembly_seconds : float -- scene-force Jacobians, refill of the matrix, right-hand side [s]
-    setup_seconds : float -- AMG hierarchy (re)build in this step, 0 when reused [s]
-    solve_seconds : float -- linear solves (CG iterations or triangular solves) [s]
-    rebuilt : bool -- the AMG hierarchy was (re)built in this step
+    iterations : int
+        CG iterations of the linearised solve (0 for the direct solver)
+    residual : float
+        its relative residual [-]
+    solves : tuple of SolveInfo
+        the linearised solve, then one per Newton iteration
+    newton_residuals : (k + 1,) float
+        ||M (v1 - v0) - h F(x1, v1, t + h)|| over the free nodes [N s] after the linearised solve and after each Newton
+        iteration
+    forces_seconds : float
+        spring forces with their Jacobian blocks (one pass) and scene forces [s]
+    assembly_seconds : float
+        scene-force Jacobians, refill of the matrix, right-hand side [s]
+    setup_seconds : float
+        AMG hierarchy (re)build in this step, 0 when reused [s]
+    solve_seconds : float
+        linear solves (CG iterations or triangular solves) [s]
+    rebuilt : bool
+        the AMG hierarchy was (re)built in this step
     """
 
     iterations: int
@@ -148,22 +158,35 @@ class ImplicitEuler(Integrator):
 
     Parameters
     ----------
-    solver : {"amg", "jacobi", "direct"} -- linear solver (see :mod:`volspring.solvers`)
-    rtol : float -- CG relative residual target (see the module docstring for why 1e-3)
-    maxiter : int -- CG iteration cap per solve
-    newton_iterations : int -- extra Newton iterations on the nonlinear backward Euler equation
-        M (v1 - v0) = h F(x0 + h v1, v1, t + h) after the linearised step (0: Baraff-Witkin)
-    rebuild_growth : float -- rebuild the AMG hierarchy when the iteration count exceeds this
-        factor times max(5, the count right after the last build)
-    rebuild_every : int, optional -- also rebuild every this many steps
-    clamp_compression : bool -- clamp the transverse stiffness of compressed springs at 0
-    on_failure : {"raise", "warn"} -- what a solve that stops short of ``rtol`` does
-    smoother : {"gauss_seidel", "jacobi"} -- AMG smoother
-    matrix_free : bool -- apply the sets that offer it as products (see the module docstring)
+    solver : {"amg", "jacobi", "direct"}
+        linear solver (see :mod:`volspring.solvers`)
+    rtol : float
+        CG relative residual target (see the module docstring for why 1e-3)
+    maxiter : int
+        CG iteration cap per solve
+    newton_iterations : int
+        extra Newton iterations on the nonlinear backward Euler equation M (v1 - v0) = h F(x0 + h v1, v1, t + h) after
+        the linearised step (0: Baraff-Witkin)
+    rebuild_growth : float
+        rebuild the AMG hierarchy when the iteration count exceeds this factor times max(5, the count right after the
+        last build)
+    rebuild_every : int, optional
+        also rebuild every this many steps
+    clamp_compression : bool
+        clamp the transverse stiffness of compressed springs at 0
+    on_failure : {"raise", "warn"}
+        what a solve that stops short of ``rtol`` does
+    smoother : {"gauss_seidel", "jacobi"}
+        AMG smoother
+    matrix_free : bool
+        apply the sets that offer it as products (see the module docstring)
+    timer : callable
+        ``timer() -> seconds`` behind the step's timings and the linear solver's (default :func:`time.perf_counter`)
 
     Attributes
     ----------
-    last_solve : ImplicitStepInfo or None -- what the last step did
+    last_solve : ImplicitStepInfo or None
+        what the last step did
 
     Examples
     --------
@@ -288,10 +311,13 @@ class ImplicitEuler(Integrator):
 
         Returns
         -------
-        matrix : (3f, 3f) BSR -- M - h dF/dv - h^2 dF/dx of every element set, assembled (also those
-            the step applies as products), plus diagonal scene terms
-        extra : (3f, 3f) CSR or None -- non-diagonal scene-force terms, applied separately
-        pattern : BlockPattern -- numbering of the unknowns (``pattern.free_nodes``)
+        matrix : (3f, 3f) BSR
+            M - h dF/dv - h^2 dF/dx of every element set, assembled (also those the step applies as products), plus
+            diagonal scene terms
+        extra : (3f, 3f) CSR or None
+            non-diagonal scene-force terms, applied separately
+        pattern : BlockPattern
+            numbering of the unknowns (``pattern.free_nodes``)
         """
         pattern = self.pattern(scene)
         if pattern.has_operator:
@@ -379,9 +405,11 @@ class ImplicitEuler(Integrator):
 
         last, before = memory.get(_KEY + "dv"), memory.get(_KEY + "dv_before")
         warm = last if last is not None and last.shape == (pattern.size,) else None
-        if warm is not None and before is not None and before.shape == warm.shape:
+        if warm is not None and before is not None and before.shape == warm.shape and \
+                memory.get(_KEY + "extrapolate", True):
             # The velocity change of a smooth motion varies smoothly: extrapolate it linearly from the last two
-            # steps (CG iterations at rtol 1e-3 on the README beam: springs 6.0 -> 5.5, smoothed 11.8 -> 10.7).
+            # steps, while that guessed the last step better than the last change itself (not across a jump:
+            # contact starting or ending).
             warm = 2.0 * warm - before
         solves = []
         if pattern.size:
@@ -419,6 +447,9 @@ class ImplicitEuler(Integrator):
                        _KEY + "residual": float(first.residual)})
         if last is not None and last.shape == dv.shape:
             memory[_KEY + "dv_before"] = last
+            if before is not None and before.shape == dv.shape:
+                memory[_KEY + "extrapolate"] = bool(np.linalg.norm(dv - (2.0 * last - before)) <
+                                                    np.linalg.norm(dv - last))
         else:
             memory.pop(_KEY + "dv_before", None)
         self.last_solve = ImplicitStepInfo(
