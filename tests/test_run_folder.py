@@ -450,3 +450,56 @@ def test_opening_removes_what_a_killed_run_left(tmp_path):
         RunFolder.open(folder, command=["next"])
     run = RunFolder.open(folder, command=["next"], overwrite=True)
     assert listing(folder) == [MANIFEST_NAME] and [path.name for path in run.removed] == ["frame_0000.vtu"]
+
+
+# ---------------------------------------------------------------------- the run record: versions, timings, solver
+def test_a_manifest_without_the_run_record_of_newer_runs_still_reads_and_is_replaced(tmp_path):
+    # A manifest as volspring wrote it before runs recorded versions, timings, solver statistics and the summary.
+    folder = tmp_path / "run"
+    folder.mkdir()
+    (folder / "frame_0000.vtu").write_text("x")
+    (folder / MANIFEST_NAME).write_text(json.dumps({
+        "format": "volspring-run", "version": 1, "command": SIM, "started": "2025-01-31T09:12:44+00:00",
+        "ended": "2025-01-31T09:13:01+00:00", "status": "finished", "pid": 1, "host": "elsewhere",
+        "volspring": "0.0.9", "earlier": [], "files": ["frame_0000.vtu"]}))
+    old = read_manifest(folder)
+    assert old["status"] == "finished" and "versions" not in old and "solver" not in old
+    run = RunFolder.open(folder, command=SIM, overwrite=True)
+    assert run.removed == (folder / "frame_0000.vtu",)
+
+
+def test_a_sim_run_records_versions_timings_solver_statistics_and_its_summary(tmp_path, capsys):
+    from volspring.cli import main
+    from volspring.output.run_manifest import RECORDED_PACKAGES
+
+    status = main(["box:0.2,0.05,0.05", "--size", "0.05", "--pin", "xmin", "--duration", "0.05", "--dt", "0.01",
+                   "--frame-dt", "0.02", "--out", str(tmp_path / "run"), "--no-progress"])
+    out = capsys.readouterr().out
+    assert status == 0
+    manifest = read_manifest(tmp_path / "run")
+    assert manifest["summary"] == out.splitlines()  # what the terminal showed, line for line
+    assert manifest["working_directory"] == os.getcwd()
+    versions = manifest["versions"]
+    assert versions["numpy"] == np.__version__ and set(RECORDED_PACKAGES) <= set(versions)
+    assert versions["python"] == ".".join(map(str, sys.version_info[:3]))
+    solver = manifest["solver"]
+    assert solver["integrator"] == "implicit_euler" and solver["steps"] == 5
+    assert solver["frames"] == 3  # t = 0, 0.02, 0.04
+    iterations = solver["cg_iterations"]
+    assert 1 <= iterations["mean"] <= iterations["max"] and iterations["total"] == round(5 * iterations["mean"])
+    assert 1 <= solver["hierarchy_rebuilds"] <= 5  # the first step builds the AMG hierarchy
+    timings = manifest["timings"]
+    phases = timings["build_seconds"] + timings["stepping_seconds"] + timings["writing_seconds"]
+    # The phases are disjoint parts of the run; rounding each to 1 us leaves at most 3 us over.
+    assert all(value >= 0 for value in timings.values()) and phases <= timings["wall_seconds"] + 3e-6
+
+
+def test_an_explicit_run_records_its_steps_without_solves(tmp_path, capsys):
+    from volspring.cli import main
+
+    status = main(["box:0.2,0.05,0.05", "--size", "0.05", "--pin", "xmin", "--duration", "1e-4", "--dt", "1e-5",
+                   "--frame-dt", "5e-5", "--integrator", "verlet", "--out", str(tmp_path / "run"), "--quiet"])
+    assert status == 0
+    manifest = read_manifest(tmp_path / "run")
+    assert manifest["solver"] == {"integrator": "verlet", "steps": 10, "frames": 3}  # no linear solves to count
+    assert len(manifest["summary"]) >= 4 and capsys.readouterr().out == ""  # kept, though --quiet printed none

@@ -2,7 +2,9 @@
 
 Every example scene in examples/scenes/ runs here, shortened with the duration flag, and is checked on its
 physics (the beam sags, the ball comes to rest on the block, the colliding bodies keep their momentum and
-bounce apart, the ring drifts downwind and turns with the vortex).
+bounce apart, the ring drifts downwind and turns with the vortex; the plucked string swings to its other
+side in half a period with its ends held, the hair hangs from its root without stretching, the cloth drapes
+over the ball within its strain limit, the lattice bunny sags, the cloth lands on the block and folds over it).
 """
 
 import json
@@ -14,13 +16,15 @@ import pytest
 from volspring.checkpoint import load_checkpoint
 from volspring.cli import build_parser, main
 from volspring.cli._arguments import BODY_FLAGS, DEFAULT_NU, RUN_FLAGS
-from volspring.output import read_manifest
+from volspring.output import read_manifest, read_pvd
 from volspring.scene_file import SCENE, assemble_scene, read_scene, split_key_path
 
 from conftest import cube_mesh
 
 SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
 BEAM, BALL, TWO, WIND = (SCENES / f"{name}.toml" for name in ("beam", "ball_on_block", "two_bodies", "wind_and_vortex"))
+STRING, HAIR, CLOTH, LATTICE, CLOTH_ON_BLOCK = (SCENES / f"{name}.toml" for name in (
+    "plucked_string", "hanging_hair", "cloth_on_a_ball", "lattice_bunny", "cloth_on_a_block"))
 END_STATE = ["--checkpoint-every", "100000", "--quiet"]  # no frame checkpoint, but the end state in checkpoint.npz
 
 
@@ -108,6 +112,147 @@ def test_a_steady_wind_accelerates_a_free_body_as_implicit_euler_predicts(tmp_pa
     assert velocity[0] == pytest.approx(w * (1 - (1 + h * c) ** -steps), rel=1e-9)
 
 
+# ---------------------------------------------------------------------- structures: strings, hair, cloth, lattices
+def test_every_example_scene_is_run_here():
+    source = Path(__file__).read_text()
+    for scene in sorted(SCENES.glob("*.toml")):
+        assert scene.stem in source, f"examples/scenes/{scene.name} is not run by tests/test_scene_file.py"
+
+
+def test_the_plucked_string_swings_to_its_other_side_in_half_a_period(tmp_path, capsys):
+    f1 = np.sqrt(10.0 / 0.01) / 2.0  # c / (2 L): the scene's tension, density and length
+    state, model = end_state(capsys, STRING, tmp_path, "--duration", str(1 / (2 * f1)))
+    x0 = model.rest_positions
+    assert np.array_equal(state.x[[0, 40]], x0[[0, 40]])  # the pinned ends hold exactly
+    # Plucked +5 mm, the middle is at -5 mm half a period later for the wave equation. The chain's implicit
+    # Euler damps mode n by (1 + (n w1 dt)^2)^(-steps / 2) (0.97 for the first, 0.75 for the third...), which
+    # leaves -0.87 of the pluck (measured); 0.8 bounds that, while a string that had not swung would be > 0.
+    assert -0.005 < state.x[20, 2] < -0.8 * 0.005
+    assert np.abs(state.x[:, 1]).max() == 0.0  # plucked in the xz plane, it stays in it
+
+
+def test_the_hanging_hair_keeps_its_root_and_falls_without_stretching(tmp_path, capsys):
+    from volspring.springs import spring_strains
+
+    state, model = end_state(capsys, HAIR, tmp_path, "--duration", "0.1")
+    x0 = model.rest_positions
+    assert np.array_equal(state.x[:2], x0[:2])  # the clamped root segment, pinned by node numbers
+    assert state.x[-1, 2] - x0[-1, 2] < -1e-3  # the curl sags under its own weight (measured 1.7 mm)
+    # EA = 20 N against a weight of 6e-6 N: strains of order 1e-7 (measured 3e-7); 1e-5 would be a
+    # strand stretched by its bending, i.e. angle springs pulling the wrong nodes.
+    assert np.abs(spring_strains(model, state.x)).max() < 1e-5
+    assert [type(element_set).__name__ for element_set in model.elements] == ["Springs", "AngleSprings",
+                                                                              "DihedralSprings"]
+
+
+def test_the_cloth_drapes_over_the_ball_within_its_strain_limit(tmp_path, capsys):
+    from volspring.springs import spring_strains
+    from volspring.structures import cloth_springs
+
+    state, model = end_state(capsys, CLOTH, tmp_path, "--duration", "0.5")
+    x0 = model.rest_positions
+    limited = cloth_springs(model, "structural", "shear")
+    # Provot's limit stops sweeping once no spring is more than tolerance = 1e-3 past tau = 0.1.
+    assert spring_strains(model, state.x)[limited].max() <= 0.1 + 1e-3
+    assert np.array_equal(state.x[[0, 16]], x0[[0, 16]])  # the two pinned corners
+    # The free corners fall past the ball (top at z = 0) while the middle rests on it, and no node enters
+    # the ball (radius 0.3 m; its 5 cm facets lie inside the sphere, by at most 1 mm).
+    assert state.x[[272, 288], 2].max() < -0.2 and 0 < state.x[144, 2] < 0.02
+    assert np.linalg.norm(state.x - [0, 0, -0.3], axis=1).min() > 0.3 - 1e-3
+    frames = sorted(path.name for path in tmp_path.glob("frame_surface_*.vtu"))
+    assert len(frames) == 26 and (tmp_path / "surface_0025.obj").is_file()  # the triangles for ParaView, Blender
+
+
+def test_the_lattice_bunny_sags_from_its_ears(tmp_path, capsys):
+    coarse = ["--set", "bodies[0].cell_size=20", "--set", "output.blender=false"]  # 2 cm cells: a quick bunny
+    state, model = end_state(capsys, LATTICE, tmp_path, "--duration", "0.3", *coarse)
+    x0 = model.rest_positions
+    top = x0[:, 2] == x0[:, 2].max()
+    assert top.sum() >= 4 and np.array_equal(state.x[top], x0[top])  # region "zmax": the ears' top layer
+    drop = (model.masses @ (state.x - x0))[2] / model.total_mass
+    rising = (model.masses @ state.v)[2] / model.total_mass
+    # Hung from its ears the soft bunny (E = 50 kPa) sags by about 11 cm at 0.23 s, then springs back up
+    # (measured: 8.3 cm down and rising at 0.5 m/s at 0.3 s); in free fall it would be 44 cm down and falling.
+    assert -0.15 < drop < -0.02 and rising > 0.1
+    assert model.rule == "lattice" and x0[:, 2].max() - x0[:, 2].min() > 0.14  # turned: the bunny's up is +z
+
+
+def test_a_cloth_lands_on_a_block_and_folds_over_its_edges(tmp_path, capsys):
+    from volspring.springs import spring_strains
+    from volspring.structures import cloth_springs
+
+    state, model = end_state(capsys, CLOTH_ON_BLOCK, tmp_path, "--duration", "0.3", "--set", "output.blender=false")
+    cloth, x0 = model.body_nodes(1), model.rest_positions
+    assert model.topology is not None and cloth.min() == model.topology.mesh.node_count  # after the block's nodes
+    over = np.abs(x0[cloth, :2]).max(axis=1) < 0.19  # over the block's 0.4 m top, a cell from its edge
+    # The contact layer (1 cm) holds the cloth over the block: a node's weight m g / k_c is 5e-5 m deep.
+    assert state.x[cloth[over], 2].min() > 0.01 - 1e-3
+    assert state.x[cloth[np.abs(x0[cloth, :2]).max(axis=1) > 0.21], 2].max() < -0.01  # the overhang hangs down
+    assert spring_strains(model, state.x)[cloth_springs(model, "structural", "shear")].max() <= 0.1 + 1e-9
+
+
+def test_a_cloth_from_a_triangle_file_pinned_by_node_numbers(tmp_path, capsys):
+    import trimesh
+
+    from volspring.structures import cloth_springs
+
+    trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2], [0, 2, 3]],
+                    process=False).export(tmp_path / "sheet.obj")
+    (tmp_path / "scene.toml").write_text('[[bodies]]\nkind = "cloth"\nmesh = "sheet.obj"\nareal_density = 0.2\n'
+                                         'membrane_stiffness = 100.0\nbend_stiffness = 1.0\n'
+                                         '[[supports]]\ntype = "pin"\nnodes = [0, 1]\n[[fields]]\ntype = "gravity"\n')
+    state, model = end_state(capsys, tmp_path / "scene.toml", tmp_path / "out", "--duration", "0.05")
+    counts = [int(cloth_springs(model, kind).sum()) for kind in ("structural", "bend")]
+    assert model.node_count == 4 and counts == [5, 1]  # the square's 5 edges, 1 spring across its diagonal
+    assert np.array_equal(state.x[:2], model.rest_positions[:2]) and state.x[2:, 2].max() < -1e-3
+
+
+def test_a_structure_scene_resumes_bit_identically(tmp_path, capsys):
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    assert run(capsys, STRING, "--duration", "0.008", "--out", whole, *END_STATE)[0] == 0
+    assert run(capsys, STRING, "--duration", "0.004", "--out", parts, *END_STATE)[0] == 0
+    status, _, err = run(capsys, STRING, "--duration", "0.008", "--out", parts, *END_STATE,
+                         "--resume", parts / "checkpoint.npz")
+    assert status == 0, err
+    resumed, uninterrupted = (load_checkpoint(folder / "checkpoint.npz") for folder in (parts, whole))
+    assert resumed.step == 40 and resumed.x.tobytes() == uninterrupted.x.tobytes()
+    # The spring series (a string has no tets) continues: frames 0 to 4 at 2 ms, none written twice.
+    assert [time for time, _ in read_pvd(parts / "frame_springs.pvd")] == [0.0, 0.002, 0.004, 0.006, 0.008]
+
+
+@pytest.mark.parametrize("override, message", [
+    ("bodies[0].kind=strng", 'bodies[0].kind = "strng" is not a known kind; did you mean string?'),
+    ("bodies[0].cont=3", "bodies[0].cont is not a known key; did you mean count?"),
+    ("bodies[0].count=1", "bodies[0].count = 1 nodes; expected an integer >= 2"),
+    ("bodies[0].tension=-1e6", "bodies[0].tension = -1000000.0 N would need a rest length"),
+    ("bodies[0].pluck_at=1.5", "bodies[0].pluck_at = 1.5 is not in (0, 1)"),
+    ("supports[0].nodes=[0, 41]", "supports[0].nodes = [0, 41]: node 41 is not in bodies[0] (41 nodes, 0 to 40)"),
+    ('supports[0].region="xmin"', "supports[0] gives region and nodes; expected one of region"),
+    ("output.blender=true", "output.blender: strings and hair have no surface for Blender's OBJ files"),
+])
+def test_bad_structure_values_are_one_line_naming_the_key_path(capsys, override, message):
+    status, out, err = run(capsys, STRING, "--set", override, "--duration", "0")
+    assert status == 2 and out == "" and err.count("\n") == 1
+    assert message in err, err
+
+
+@pytest.mark.parametrize("text, message", [
+    ('[[bodies]]\nkind = "cloth"\nwidth = 1\nheight = 1\nnx = 4\nareal_density = 0.2\n', "bodies[0] gives no ny"),
+    ('[[bodies]]\nkind = "cloth"\nwidth = 1\nheight = 1\nnx = 4\nny = 4\nareal_density = 0.2\n',
+     "bodies[0]: give membrane_stiffness= (E t [N/m]) or stretch_stiffness= (k [N/m]), one of the two"),
+    ('[[bodies]]\nkind = "lattice"\nshape = "sphere:0.1"\n', "bodies[0].cell_size is missing; expected a number"),
+    ('[[bodies]]\nkind = "lattice"\nshape = "sphere:0.1"\ncell_size = 0.05\nmaterial = {nu = 0.7}\n',
+     "bodies[0].material.nu = 0.7 is not in (-1, 0.5)"),
+    ('[[bodies]]\nkind = "string"\nstart = [0, 0, 0]\nend = [1, 0, 0]\ncount = 3\nmass = 1\nstiffness = 1\n'
+     '[[bodies]]\nshape = "box:1,0.1,0.1"\n', "bodies[1] is a tet body after bodies[0] (kind = \"string\")"),
+])
+def test_bad_structure_scene_files_are_one_line_naming_the_key_path(tmp_path, capsys, text, message):
+    (tmp_path / "scene.toml").write_text(text)
+    status, _, err = run(capsys, tmp_path / "scene.toml", "--duration", "0")
+    assert status == 2 and err.count("\n") == 1
+    assert message in err, err
+
+
 # ---------------------------------------------------------------------- a scene file and the flags
 def test_the_readme_beam_from_a_scene_file_equals_the_flags_bit_for_bit(tmp_path, capsys):
     flags = ["box:1,0.1,0.1", "--size", "0.05", "--pin", "-0.51,-1,-1,-0.49,1,1", "--dt", "0.01", "--blender"]
@@ -119,6 +264,23 @@ def test_the_readme_beam_from_a_scene_file_equals_the_flags_bit_for_bit(tmp_path
     assert by_file.x.tobytes() == by_flags.x.tobytes() and by_file.v.tobytes() == by_flags.v.tobytes()
     for frame in ("frame_0002.vtu", "surface.pc2"):
         assert (tmp_path / "file" / frame).read_bytes() == (tmp_path / "flags" / frame).read_bytes()
+
+
+def test_the_command_a_manifest_records_remakes_the_run_bit_for_bit(tmp_path, capsys, monkeypatch):
+    # The README's beam scene, as a user runs it: a relative scene path and a relative output folder.
+    (tmp_path / "beam.toml").write_bytes(BEAM.read_bytes())
+    assert run(capsys, "beam.toml", "--duration", "0.1", "--out", "beam_run", "--no-progress")[0] == 0
+    manifest = read_manifest(tmp_path / "beam_run")
+    files = {name: (tmp_path / "beam_run" / name).read_bytes() for name in manifest["files"]}
+    assert "frame_0002.vtu" in files and "surface.pc2" in files
+    monkeypatch.chdir(tmp_path.parent)  # made again from elsewhere: the manifest says where the command ran
+    monkeypatch.chdir(manifest["working_directory"])
+    status, _, err = run(capsys, *manifest["command"][1:], "--overwrite")
+    assert status == 0, err
+    again = read_manifest(tmp_path / "beam_run")
+    assert again["scene"] == manifest["scene"] and again["files"] == manifest["files"]
+    for name, data in files.items():  # every frame file, byte for byte
+        assert (tmp_path / "beam_run" / name).read_bytes() == data, name
 
 
 def test_flags_override_the_single_body_and_the_run_and_the_manifest_records_the_resolved_scene(tmp_path, capsys):

@@ -37,6 +37,8 @@ class BuiltRun(NamedTuple):
     scene: object
     integrator: object
     state: object  # the initial state
+    triangles: object = None  # a scene's cloth triangles (model node numbers), for the ParaView surface series
+    render_surface: object = None  # a scene's surface for Blender when it has structures; None: the model's boundary
 
 
 def build_run(args, note=None) -> BuiltRun:
@@ -68,6 +70,9 @@ def build_run(args, note=None) -> BuiltRun:
     if len(records) == 1:
         record = {**records[0], "element_sets": element_sets}
         origin = built.origins[0]
+        if "kind" in records[0]:  # a string, hair, cloth or lattice: the body line says what it is
+            return BuiltRun(origin, built.model, record, None, built.scene, built.integrator, built.state,
+                            built.triangles, built.render_surface)
     else:
         record = {"rung": built.model.rung, "bodies": records, "element_sets": element_sets}
         origin = f"{args.input}, {len(records)} bodies (" + "; ".join(
@@ -75,13 +80,16 @@ def build_run(args, note=None) -> BuiltRun:
             enumerate(zip(args.scene["bodies"], built.origins))) + ")"
     note("model", record)
     return BuiltRun(origin, built.model, record, record if len(records) == 1 else None, built.scene,
-                    built.integrator, built.state)
+                    built.integrator, built.state, built.triangles, built.render_surface)
 
 
 def _body_record(spec) -> dict:
-    """The model record of one body of a scene file, as :func:`model_record` gives it for the flags."""
+    """The model record of one body of a scene file, as :func:`model_record` gives it for the flags; for a
+    string, hair, cloth or lattice its kind (the manifest's scene has its every value)."""
     from volspring.ladder import DEFAULT_ALPHA
 
+    if spec["kind"] != "tet":
+        return {"kind": spec["kind"], **({"material": spec["material"]} if "material" in spec else {})}
     record = {"rung": spec["model"], **spec["material"], "damping_ratio": spec["damping_ratio"]}
     if spec["model"] == "smoothed":
         record["alpha"] = spec.get("alpha", DEFAULT_ALPHA)
@@ -111,7 +119,7 @@ def read_scene_file(args, argv) -> dict:
     _copy_run_values(args, scene)
     # A nu the file gives to a pure-spring body (its resolved nu is filled in either way), for build_run to say so.
     args.ignored_nu = [index for index, body in enumerate(raw["bodies"]) if "nu" in body.get("material", {})
-                       and scene["bodies"][index]["model"] == "springs"]
+                       and scene["bodies"][index].get("model") == "springs"]
     return scene
 
 

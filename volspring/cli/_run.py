@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+import os
 import shlex
 import sys
 import time
@@ -21,7 +22,7 @@ from volspring.cli import _build
 from volspring.cli._arguments import (CHECKPOINT_NAME, EXIT_DIVERGED, EXIT_FAILED, EXIT_USAGE, PROG, SERIES_NAME,
                                       SURFACE_NAME, InputError, UsageError, build_parser, check_arguments,
                                       joined_vectors)
-from volspring.cli._terminal import Progress, fail, show_warning, summary
+from volspring.cli._terminal import Progress, fail, show_warning, summary_lines
 
 __all__ = ["Diverged", "RunProgress", "main", "run"]
 
@@ -121,8 +122,16 @@ def _run_in(args, where: RunProgress, folder) -> int:
     from volspring.checkpoint import load_checkpoint, save_checkpoint
     from volspring.simulate import simulate
 
-    started = time.perf_counter()
-    with stdout_to_stderr(args.verbose):  # with -v, gmsh's log (a shape meshed) on stderr, not in the summary
+    from volspring.cli._statistics import RunTimings, StepStatistics
+    from volspring.output.run_manifest import package_versions
+
+    timings, statistics = RunTimings(), StepStatistics()
+    started = timings.started
+    note = (lambda key, value: None) if folder is None else folder.note
+    # How the run was made, before anything can fail: the folder's manifest already holds the command.
+    note("working_directory", os.getcwd())
+    note("versions", package_versions())
+    with stdout_to_stderr(args.verbose), timings.phase("build"):  # with -v, gmsh's log on stderr, not in the summary
         built = _build.build_run(args, note=None if folder is None else folder.note)  # the flags, or the scene file
     model, scene, integrator = built.model, built.scene, built.integrator
 
@@ -139,28 +148,30 @@ def _run_in(args, where: RunProgress, folder) -> int:
     # uninterrupted one (no round-off from t).
     remaining = total_steps - state.step
 
-    writers = _writers(args, model, first_frame, None if folder is None else folder.record)
+    writers = _writers(args, built, first_frame, None if folder is None else folder.record)
     checks = {} if args.runaway_factor is None else {"runaway_factor": args.runaway_factor}
     progress = Progress(args=args, first_step=state.step, last_step=total_steps)
     last = {"frames": 0, "state": state}
 
     def on_frame(frame_index, current):
-        if folder is not None:  # the frame's files listed in one manifest write, before any is written
-            folder.record(*(path for writer in writers for path in writer.frame_paths()))
-        for writer in writers:
-            writer(frame_index, current)
-        if args.checkpoint_every and frame_index and frame_index % args.checkpoint_every == 0:
-            folder.record(args.out / CHECKPOINT_NAME)
-            save_checkpoint(args.out / CHECKPOINT_NAME, current, scene=scene, integrator=integrator, dt=args.dt)
-            where.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
+        with timings.phase("writing"):
+            if folder is not None:  # the frame's files listed in one manifest write, before any is written
+                folder.record(*(path for writer in writers for path in writer.frame_paths()))
+            for writer in writers:
+                writer(frame_index, current)
+            if args.checkpoint_every and frame_index and frame_index % args.checkpoint_every == 0:
+                folder.record(args.out / CHECKPOINT_NAME)
+                save_checkpoint(args.out / CHECKPOINT_NAME, current, scene=scene, integrator=integrator, dt=args.dt)
+                where.checkpoint = (args.out / CHECKPOINT_NAME, current.t)
         last["frames"] += 1
         last["state"] = where.state = current
         progress.update(current, first_frame + frame_index)
 
     where.running = True
     try:
-        result = simulate(scene, integrator, duration=remaining * args.dt, dt=args.dt, state=state,
-                          frame_dt=args.frame_dt, callback=on_frame, guard=args.guard, **checks)
+        with statistics.watching(integrator), timings.phase("stepping"):
+            result = simulate(scene, integrator, duration=remaining * args.dt, dt=args.dt, state=state,
+                              frame_dt=args.frame_dt, callback=on_frame, guard=args.guard, **checks)
     except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
         progress.close()
         kept = ""
@@ -170,12 +181,19 @@ def _run_in(args, where: RunProgress, folder) -> int:
         raise Diverged(f"{error}{kept}") from error
     finally:
         progress.close()
+        note("solver", statistics.record(frames=last["frames"]))
     if args.checkpoint_every:
-        folder.record(args.out / CHECKPOINT_NAME)
-        save_checkpoint(args.out / CHECKPOINT_NAME, result.state, scene=scene, integrator=integrator, dt=args.dt)
+        with timings.phase("writing"):
+            folder.record(args.out / CHECKPOINT_NAME)
+            save_checkpoint(args.out / CHECKPOINT_NAME, result.state, scene=scene, integrator=integrator,
+                            dt=args.dt)
+    lines = summary_lines(args, built.origin, model, scene, integrator, result, first_frame,
+                          time.perf_counter() - started, built.summary_record,
+                          surface_series=built.triangles is not None)
+    note("timings", timings.record())
+    note("summary", lines)
     if not args.quiet:
-        summary(args, built.origin, model, scene, integrator, result, first_frame, time.perf_counter() - started,
-                built.summary_record)
+        print("\n".join(lines))
     return 0
 
 
@@ -185,23 +203,32 @@ def _frames_before(args, t) -> int:
 
     if args.out is None:
         return 0
-    pvd = args.out / f"{SERIES_NAME}.pvd"
-    if not pvd.is_file():
+    # The first series a ParaViewWriter writes: the tets, or the springs of a model without tets.
+    pvd = next((path for path in (args.out / f"{SERIES_NAME}.pvd", args.out / f"{SERIES_NAME}_springs.pvd")
+                if path.is_file()), None)
+    if pvd is None:
         return 0
     # Half a step: frames are at least a step apart, and the PVD lists decimal times while t is the float the
     # steps added up to, which drifts from the decimal by more than 1e-6 dt after ~3e5 steps.
     return sum(1 for time, _ in read_pvd(pvd) if time < t - 0.5 * args.dt)
 
 
-def _writers(args, model, first_frame, record):
+def _writers(args, built, first_frame, record):
     from volspring.output import BlenderWriter, ParaViewWriter
 
     if args.out is None:
         return []
-    writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame, record=record)]
+    model = built.model
+    writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame, record=record,
+                              triangles=built.triangles)]
     if args.blender:
-        surface = (model if args.render_surface is None
-                   else _build.anchored_surface(args.render_surface, model, args.units, args.scale))
+        if args.render_surface is not None:
+            surface = _build.anchored_surface(args.render_surface, model, args.units, args.scale)
+        elif model.topology is None and built.render_surface is None:
+            raise InputError("output.blender: strings and hair have no surface for Blender's OBJ files; their "
+                             f"springs are in {SERIES_NAME}_springs.pvd (ParaView)")
+        else:
+            surface = model if built.render_surface is None else built.render_surface
         pc2 = args.out / f"{SURFACE_NAME}.pc2"
         # A frame every step when --frame-dt is below --dt: the import script's fps is one per frame written.
         writers.append(BlenderWriter(args.out, surface, name=SURFACE_NAME,

@@ -13,7 +13,7 @@ import numpy as np
 from meshing._command_line import advance_to, error_line, progress_bar, progress_mode
 from volspring.cli._arguments import CHECKPOINT_NAME, PROG, SERIES_NAME, SURFACE_NAME
 
-__all__ = ["Progress", "fail", "show_warning", "summary"]
+__all__ = ["Progress", "fail", "show_warning", "summary", "summary_lines"]
 
 
 def fail(message, status) -> int:
@@ -52,23 +52,38 @@ class Progress:
         self.bar.close()
 
 
-def summary(args, origin, model, scene, integrator, result, first_frame, seconds, record=None) -> None:
-    """Print what was run and how it ended on stdout: body, model, run, end state, inverted tets, outputs.
+def summary(*args, **options) -> None:
+    """Print :func:`summary_lines` on stdout."""
+    print("\n".join(summary_lines(*args, **options)))
 
-    ``record`` is the model's description (:func:`volspring.cli._build.model_record`), for its line.
+
+def summary_lines(args, origin, model, scene, integrator, result, first_frame, seconds, record=None, *,
+                  surface_series=False) -> list:
+    """What was run and how it ended: body, model, run, end state, inverted tets, outputs; one line each.
+
+    ``record`` is the model's description (:func:`volspring.cli._build.model_record`), for its line;
+    ``surface_series`` says that a cloth's triangles were written (``frame_surface.pvd``). The run prints
+    the lines on stdout (unless ``--quiet``) and keeps them in its manifest (``"summary"``).
     """
     state = result.state
     displacement = np.linalg.norm(state.x - model.rest_positions, axis=1)
     pinned = 0 if scene.pins is None else len(scene.pins.nodes)
     topology = model.topology
-    mesh = topology.mesh
-    nodes = f"{mesh.node_count} nodes"
+    mesh = None if topology is None else topology.mesh
+    tets = 0 if mesh is None else mesh.tet_count
+    nodes = f"{model.node_count if mesh is None else mesh.node_count} nodes"
     springs = f", {model.spring_count} springs" if model.spring_count else ""
-    if topology.shell_node_count:  # a topology file with shells: the model has them too
-        nodes += f" + {topology.shell_node_count} shell nodes in {topology.layer_count} layer(s)"
-        springs += f" ({model.spring_count - model.kind_counts()['tet_edge']} shell springs)"
+    # Past the mesh nodes: shell nodes (layer >= 1), then the nodes of strings, hair, cloths and lattices
+    # joined after the tet bodies (layer 0, structures.combine).
+    shells = 0 if topology is None else int((topology.shell_layer > 0).sum())
+    if shells:  # a topology file with shells: the model has them too
+        nodes += f" + {shells} shell nodes in {topology.layer_count} layer(s)"
+        counts = model.kind_counts()
+        springs += f" ({sum(counts[kind] for kind in ('shell', 'shell_diagonal', 'shell_edge'))} shell springs)"
+    if mesh is not None and model.node_count > mesh.node_count + shells:
+        nodes += f" + {model.node_count - mesh.node_count - shells} nodes of strings, hair, cloths or lattices"
     lines = [
-        f"body: {origin}: {nodes}, {mesh.tet_count} tets{springs}, "
+        f"body: {origin}: {nodes}" + (f", {tets} tets" if mesh is not None else "") + f"{springs}, "
         f"mass {model.total_mass:.6g} kg, {pinned} pinned node(s)",
     ]
     if record is not None:
@@ -78,15 +93,19 @@ def summary(args, origin, model, scene, integrator, result, first_frame, seconds
         f"in {seconds:.2f} s wall time",
         f"end: max displacement {displacement.max():.6g} m (node {int(displacement.argmax())}), "
         f"kinetic energy {result.kinetic_energy[-1]:.6g} J, total energy {result.total_energy[-1]:.6g} J",
-        f"tets: {result.inverted_tets[-1]} of {mesh.tet_count} inverted at the end, at most "
-        f"{result.inverted_tets.max()} at a frame; worst volume ratio {np.nanmin(result.worst_volume_ratio):.3g}",
     ]
+    if tets:
+        lines.append(f"tets: {result.inverted_tets[-1]} of {tets} inverted at the end, at most "
+                     f"{result.inverted_tets.max()} at a frame; worst volume ratio "
+                     f"{np.nanmin(result.worst_volume_ratio):.3g}")
     if args.out is not None:
-        lines.append(f"output: {first_frame + result.frame_count} frame(s) in {args.out} ({SERIES_NAME}.pvd"
-                     + (f", {SERIES_NAME}_springs.pvd" if model.spring_count else "")
+        series = (([f"{SERIES_NAME}.pvd"] if tets else [])
+                  + ([f"{SERIES_NAME}_springs.pvd"] if model.spring_count else [])
+                  + ([f"{SERIES_NAME}_surface.pvd"] if surface_series else []))
+        lines.append(f"output: {first_frame + result.frame_count} frame(s) in {args.out} ({', '.join(series)}"
                      + (f", {SURFACE_NAME}_NNNN.obj, {SURFACE_NAME}.pc2, {SURFACE_NAME}_blender.py" if args.blender else "")
                      + (f", {CHECKPOINT_NAME}" if args.checkpoint_every else "") + ")")
-    print("\n".join(lines))
+    return lines
 
 
 def _model_line(record) -> str:

@@ -14,8 +14,27 @@ Manifest layout (JSON)::
      "earlier": [],                  # the sessions a resumed run continues: command, started, ended, status
      "files": ["frame.pvd", "frame_0000.vtu", ...]}                # relative to the folder, POSIX separators
 
-A run may add entries of its own (:meth:`RunFolder.note <volspring.output.RunFolder.note>`): ``volspring-sim``
-records its model as ``"model": {"rung": "smoothed", "alpha": 0.6, "E": ..., "nu": ..., ...}``.
+A run may add entries of its own (:meth:`RunFolder.note <volspring.output.RunFolder.note>`). ``volspring sim``
+adds, so that any output folder says how it was made and can be made again::
+
+     "working_directory": "/home/me/sims",   # where the command ran: its relative paths start here
+     "versions": {"python": "3.11.9", "platform": "Linux-6.8-x86_64-with-glibc2.39", "volspring": "0.1.0",
+                  "numpy": "1.26.4", "scipy": "1.13.1", "pyamg": "5.2.1", "meshio": "5.3.5",
+                  "gmsh": "4.13.1", "trimesh": "4.4.3", ...},        # None: not installed
+     "scene": {...},                 # a scene file's run: the scene resolved, every default filled in
+     "model": {"rung": "smoothed", "alpha": 0.6, "E": ..., "nu": ..., ...},
+     "solver": {"integrator": "implicit_euler", "steps": 100, "frames": 26,
+                "cg_iterations": {"mean": 4.2, "max": 9, "total": 420}, "hierarchy_rebuilds": 3,
+                "seconds": {"forces": 0.2, "assembly": 0.1, "setup": 0.05, "solve": 0.3}},   # [s]
+     "timings": {"wall_seconds": 2.1, "build_seconds": 0.4, "stepping_seconds": 1.5,
+                 "writing_seconds": 0.2},    # [s]: stepping excludes the frames' writing
+     "summary": ["body: ...", "run: ...", "end: ...", "output: ..."]   # the lines printed on stdout
+
+``versions`` and ``working_directory`` are written when the run starts, ``solver`` when the stepping ends
+(also when it diverged), ``timings`` and ``summary`` when it finished. They are entries of the run, not
+of the layout: manifests of older runs lack them, and :func:`read_manifest` does not require them. To make
+a run again, run its ``command`` in its ``working_directory`` with ``--overwrite`` (or another ``--out``):
+the frames are the same, byte for byte, with the same ``versions`` on the same platform.
 """
 
 from __future__ import annotations
@@ -23,16 +42,51 @@ from __future__ import annotations
 import datetime
 import json
 import os
+import platform
 import shlex
 import socket
+from importlib import metadata
 from pathlib import Path
 
-__all__ = ["MANIFEST_NAME", "read_manifest"]
+__all__ = ["MANIFEST_NAME", "RECORDED_PACKAGES", "package_versions", "read_manifest"]
 
 MANIFEST_NAME = "volspring-run.json"
 MANIFEST_FORMAT = "volspring-run"
 MANIFEST_VERSION = 1
 STATUSES = ("running", "finished", "interrupted", "failed")
+#: The distributions whose versions a run records (:func:`package_versions`): volspring and what its numbers
+#: and files depend on (the solvers, the mesher, the readers and writers).
+RECORDED_PACKAGES = ("volspring", "numpy", "scipy", "pyamg", "meshio", "gmsh", "trimesh", "scikit-fem", "networkx",
+                     "h5py", "tqdm")
+
+
+def package_versions(packages=RECORDED_PACKAGES) -> dict:
+    """The Python version, the platform and the installed version of each package.
+
+    Parameters
+    ----------
+    packages : sequence of str
+        Distribution names, as ``pip`` knows them.
+
+    Returns
+    -------
+    dict of str to str or None
+        ``python``, ``platform`` (:func:`platform.platform`), then each package's version; None for a
+        package that is not installed.
+
+    Examples
+    --------
+    >>> versions = package_versions(["numpy", "no-such-package"])
+    >>> sorted(versions), versions["no-such-package"]
+    (['no-such-package', 'numpy', 'platform', 'python'], None)
+    """
+    versions = {"python": platform.python_version(), "platform": platform.platform()}
+    for name in packages:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return versions
 
 
 def read_manifest(path) -> dict:

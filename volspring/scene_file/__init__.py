@@ -44,6 +44,31 @@ A scene names only what it needs::
     folder = "ball_frames"
     frame_dt = 0.02
 
+A body is meshed (``kind = "tet"``, the default) or a structure, ``kind = "string"``, ``"hair"``, ``"cloth"`` or
+``"lattice"``, whose keys are its builder's keywords (:func:`volspring.structures.string`,
+:func:`~volspring.structures.hair` on :func:`~volspring.structures.strand_points`,
+:func:`~volspring.structures.cloth_grid` or :func:`~volspring.structures.cloth_mesh`,
+:func:`volspring.lattice.lattice_body`); supports may select nodes by number, as the builder numbers them::
+
+    [[bodies]]
+    kind = "cloth"
+    width = 0.8                         # [m]
+    height = 0.8
+    nx = 16                             # node (i, j) is number j (nx + 1) + i
+    ny = 16
+    areal_density = 0.2                 # [kg/m^2]
+    membrane_stiffness = 100.0          # E t [N/m]
+    strain_limit = { tau = 0.1 }        # Provot's limit, a constraint after every step
+
+    [[supports]]
+    type = "pin"
+    body = 0
+    nodes = [0, 16]                     # two corners
+
+Tet bodies come first; the structures are joined after them (:func:`volspring.structures.combine`), and
+``[thin_contact]`` (:class:`~volspring.collision.ThinContactForce`) lets them touch the tet bodies. Obstacles are
+planes or built-in shapes (``type = "shape"``, a rigid triangle mesh), with a contact ``thickness`` for thin bodies.
+
 Key paths index arrays from 0: ``bodies[1]`` is the second body. Errors name the key path and what was
 expected (``bodies[1].material.nu = 0.7 is not in (-1, 0.5)``); an unknown key is refused with the
 closest known one suggested. Values are checked where they enter the API, so the messages are the
@@ -60,6 +85,9 @@ Examples
 >>> assembled = assemble_scene(scene, base=path.parent)
 >>> assembled.model.body_count, len(assembled.scene.pins.nodes) > 0
 (1, True)
+>>> string = assemble_scene(read_scene(path.parent / "plucked_string.toml"), base=path.parent)
+>>> string.model.node_count, string.scene.pins.nodes.tolist(), round(float(string.state.x[20, 2]), 6)
+(41, [0, 40], 0.005)
 >>> assemble_scene(read_scene(path, overrides=["bodies[0].material.nu=0.7"]), base=path.parent)
 Traceback (most recent call last):
 ...

@@ -1,10 +1,12 @@
 """From a resolved scene (:func:`volspring.scene_file.read_scene`) to the objects a run steps.
 
 The data path: ``bodies`` -> meshes (a file, or a built-in shape meshed by :func:`meshing.tetrahedralize`)
--> :class:`~volspring.bodies.Body` -> :meth:`Model.from_bodies <volspring.Model.from_bodies>`; then
+-> :class:`~volspring.bodies.Body` -> :meth:`Model.from_bodies <volspring.Model.from_bodies>`, then the
+strings, hair, cloths and lattices (:mod:`volspring.scene_file._structures`) joined after them by
+:func:`volspring.structures.combine`; then
 ``supports`` (regions as ``--pin`` takes them) -> :class:`~volspring.Pins`,
 :class:`~volspring.supports.Sliding`, :class:`~volspring.supports.Prescribed`; ``fields``,
-``obstacles`` and ``contact`` -> forces and obstacles -> :class:`~volspring.Scene`; ``integrator`` ->
+``obstacles``, ``contact`` and ``thin_contact`` -> forces and obstacles -> :class:`~volspring.Scene`; ``integrator`` ->
 :func:`~volspring.integrators.make_integrator`. Nothing is re-implemented: a value the API refuses is
 refused with the API's message, prefixed with its key path (:func:`at`).
 """
@@ -37,6 +39,11 @@ class AssembledScene:
     state : State
         The initial state, with the bodies' initial velocities.
     integrator : Integrator
+    triangles : (f, 3) int or None
+        The cloths' triangles in the model's node numbers (for ``ParaViewWriter(triangles=)``), or None.
+    render_surface : object or None
+        For a scene with structures: the surface of every body that has one (tet boundaries, cloths, lattices'
+        anchored surfaces) for ``BlenderWriter``; None for tet bodies alone (the model stands for its boundary).
     """
 
     bodies: tuple
@@ -45,6 +52,8 @@ class AssembledScene:
     scene: object
     state: object
     integrator: object
+    triangles: object = None
+    render_surface: object = None
 
 
 @contextmanager
@@ -89,17 +98,24 @@ def assemble_scene(scene: dict, *, base=".") -> AssembledScene:
     from volspring.model import Model
     from volspring.scene import Scene
 
+    specs = scene["bodies"]
+    tets = [index for index, spec in enumerate(specs) if spec["kind"] == "tet"]
+    if tets and tets[-1] >= len(tets):  # combine numbers the meshed nodes first: tet bodies come first
+        first = next(index for index, spec in enumerate(specs) if spec["kind"] != "tet")
+        raise SceneFileError(f"bodies[{tets[-1]}] is a tet body after bodies[{first}] (kind = "
+                             f"\"{specs[first]['kind']}\"); expected the tet bodies first, then strings, hair, "
+                             "cloths and lattices")
     # The checks that need no mesh first: a wrong material or field costs no meshing.
     materials = []
-    for index, spec in enumerate(scene["bodies"]):
+    for index in tets:
         with at(f"{joined('bodies', index)}.material"):
-            materials.append(Material(**spec["material"]))
+            materials.append(Material(**specs[index]["material"]))
     forces = [_field(spec, joined("fields", index)) for index, spec in enumerate(scene["fields"])]
     integrator = _integrator(scene["integrator"])
 
     bodies, origins = [], []
-    for index, (spec, material) in enumerate(zip(scene["bodies"], materials)):  # a loop over bodies, not nodes
-        path = joined("bodies", index)
+    for index, material in zip(tets, materials):  # a loop over bodies, not nodes
+        spec, path = specs[index], joined("bodies", index)
         mesh, origin = _body_mesh(spec, path, Path(base))
         with at(path):
             bodies.append(Body(mesh, material, model=spec["model"], alpha=spec.get("alpha"),
@@ -108,7 +124,14 @@ def assemble_scene(scene: dict, *, base=".") -> AssembledScene:
                                rotation=_rotation(spec.get("rotation")), velocity=spec.get("velocity", (0, 0, 0)),
                                angular_velocity=spec.get("angular_velocity", (0, 0, 0)), name=spec.get("name", "")))
         origins.append(origin)
-    model = _model(Model, bodies)
+    model = _model(Model, bodies) if bodies else None
+    velocities = [initial_velocities(bodies, model)] if bodies else []
+    if len(tets) == len(specs):
+        structures = None
+    else:
+        structures = _Structures(specs, len(tets), model, Path(base))
+        model = structures.model
+        origins += [part.origin for part in structures.parts]
 
     pins, supports = _supports(scene["supports"], model)
     obstacles = []
@@ -121,11 +144,78 @@ def assemble_scene(scene: dict, *, base=".") -> AssembledScene:
 
         with at("contact"):
             forces.append(ContactForce(model, **scene["contact"]))
+    if "thin_contact" in scene:
+        from volspring.collision import ThinContactForce
+
+        with at("thin_contact"):
+            forces.append(ThinContactForce(model, **scene["thin_contact"]))
+    constraints = []
+    if structures is not None:
+        extra_constraints, extra_forces = structures.extras(specs)
+        constraints, forces = extra_constraints, forces + extra_forces
     with at("supports"):
-        built = Scene(model, forces=forces, pins=pins, supports=supports, obstacles=obstacles)
+        built = Scene(model, forces=forces, pins=pins, supports=supports, obstacles=obstacles,
+                      constraints=constraints)
+    if structures is None:
+        with at("bodies"):
+            state = built.initial_state(v=initial_velocities(bodies, model))
+        return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator)
+    x = np.concatenate([model.rest_positions[:structures.offsets[0]]] + [part.x for part in structures.parts])
+    v = np.concatenate(velocities + [part.v for part in structures.parts])
     with at("bodies"):
-        state = built.initial_state(v=initial_velocities(bodies, model))
-    return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator)
+        state = built.initial_state(x=x, v=v)
+    return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator, structures.triangles,
+                          structures.render_surface)
+
+
+class _Structures:
+    """The strings, hair, cloths and lattices of a scene (``specs[first:]``), joined after the tet model."""
+
+    def __init__(self, specs, first, tet_model, base):
+        from volspring.scene_file._structures import build_part
+        from volspring.structures import combine
+
+        self.first = first
+        self.parts = [build_part(spec, joined("bodies", index), base)
+                      for index, spec in enumerate(specs) if index >= first]
+        self.tet_model = tet_model
+        with at("bodies"):
+            self.model = combine(([tet_model] if tet_model is not None else []) + [part.model for part in self.parts])
+        counts = [part.model.node_count for part in self.parts]
+        self.offsets = np.cumsum([0 if tet_model is None else tet_model.node_count] + counts)
+
+    def extras(self, specs):
+        """``(constraints, forces)`` of the parts on the joined model (strain limits, self-contact)."""
+        from volspring.scene_file._structures import part_extras
+
+        constraints, forces = [], []
+        for k, part in enumerate(self.parts):
+            index = self.first + k
+            more, pushes = part_extras(specs[index], joined("bodies", index), part, self.model, index,
+                                       int(self.offsets[k]))
+            constraints += more
+            forces += pushes
+        return constraints, forces
+
+    @property
+    def triangles(self):
+        """(f, 3) int -- the cloths' triangles in the joined model's numbers, or None without a cloth."""
+        found = [part.triangles + offset for part, offset in zip(self.parts, self.offsets)
+                 if part.triangles is not None]
+        return np.concatenate(found) if found else None
+
+    @property
+    def render_surface(self):
+        """The bodies' render surfaces as one :class:`~volspring.scene_file._structures.JoinedSurface`, or None."""
+        from volspring.output import BoundarySurface
+        from volspring.scene_file._structures import JoinedSurface
+
+        found = []
+        if self.tet_model is not None:
+            found.append((BoundarySurface.from_mesh(self.tet_model), 0, self.tet_model.node_count))
+        found += [(part.surface, int(start), int(start) + part.model.node_count)
+                  for part, start in zip(self.parts, self.offsets) if part.surface is not None]
+        return JoinedSurface(found, self.model.node_count) if found else None
 
 
 # ---------------------------------------------------------------------- bodies
@@ -243,6 +333,13 @@ def _support_nodes(spec, path, model) -> np.ndarray:
         if not 0 <= spec["body"] < model.body_count:
             raise SceneFileError(f"{path}.body = {spec['body']} is not a body index in [0, {model.body_count - 1}]")
         candidates = model.body_nodes(spec["body"])
+    if "nodes" in spec:
+        nodes = np.asarray(spec["nodes"], dtype=np.int64)
+        if nodes.max() >= len(candidates):
+            where = f"bodies[{spec['body']}]" if "body" in spec else "the scene"
+            raise SceneFileError(f"{path}.nodes = {spec['nodes']}: node {int(nodes.max())} is not in {where} "
+                                 f"({len(candidates)} nodes, 0 to {len(candidates) - 1})")
+        return candidates[nodes]
     points = model.rest_positions[candidates]
     selected = np.zeros(len(candidates), dtype=bool)
     for text in spec["region"]:
@@ -268,13 +365,15 @@ def _field(spec, path):
 
 
 def _obstacle(spec, path, model):
-    """``(obstacle, force)``: a projected HalfSpace, or a penalty ObstacleContactForce on one."""
+    """``(obstacle, force)``: a projected HalfSpace, or a penalty ObstacleContactForce on a plane or a shape."""
     from volspring import HalfSpace
     from volspring.collision import ObstacleContactForce
 
-    penalty = {name: spec[name] for name in ("friction", "stiffness", "stiffness_factor", "damping_ratio")
+    penalty = {name: spec[name] for name in ("friction", "stiffness", "stiffness_factor", "damping_ratio", "thickness")
                if name in spec}
     with at(path):
+        if spec["type"] == "shape":
+            return None, ObstacleContactForce(model, [_shape_obstacle(spec, path)], **penalty)
         if spec["response"] == "projection":
             extra = sorted(set(penalty) - {"friction"})
             if extra:
@@ -285,6 +384,22 @@ def _obstacle(spec, path, model):
             raise SceneFileError(f"{path}.restitution applies to response = \"projection\" (a penalty contact's "
                                  "bounce follows from its damping_ratio)")
         return None, ObstacleContactForce(model, [HalfSpace(spec["point"], spec["normal"])], **penalty)
+
+
+def _shape_obstacle(spec, path):
+    """A built-in shape's closed surface, placed, as a rigid StaticTriangleMesh."""
+    from meshing.shapes import Shape, parse_shape
+    from meshing.units import UNITS
+    from volspring.collision import StaticTriangleMesh
+
+    unit = UNITS[spec["units"]]
+    with at(f"{path}.shape"):
+        shape = parse_shape(spec["shape"])
+    shape = Shape(shape.name, tuple(dimension * unit for dimension in shape.dimensions))
+    size = spec["size"] * unit if "size" in spec else shape.extent / 20.0
+    surface = shape.surface(size=size)
+    return StaticTriangleMesh(np.asarray(surface.vertices) + np.asarray(spec.get("translation", (0.0, 0.0, 0.0))),
+                              np.asarray(surface.faces))
 
 
 def _integrator(spec):

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 
 from meshing.units import UNITS
 
-__all__ = ["Key", "SCENE", "SceneFileError", "Table", "resolved"]
+__all__ = ["BODY_KINDS", "Key", "SCENE", "SceneFileError", "Table", "resolved"]
 
 
 class SceneFileError(ValueError):
@@ -31,8 +31,13 @@ class SceneFileError(ValueError):
 class Table:
     """The known keys of one table, and a check of the table as a whole.
 
+    Parameters
+    ----------
     keys : dict of str to Key
-    check : callable, optional -- ``check(table) -> None or str``: the end of a message, after the path
+        The table's keys, in the order a resolved table lists them.
+    check : callable, optional
+        ``check(table) -> None or str``: the end of a message, after the table's path (``bodies[0] gives
+        mesh and shape; ...``), for what no single key can check.
     """
 
     keys: dict
@@ -43,14 +48,29 @@ class Table:
 class Key:
     """One key of a table.
 
-    kind : str -- one of :data:`KINDS`
-    default : object -- the value when the key is absent; None: absent (the API's own default applies)
+    Parameters
+    ----------
+    kind : str
+        One of :data:`KINDS`: what a TOML value of the key must be.
+    default : object
+        The value when the key is absent; None: absent (the API's own default applies).
     required : bool
-    choices : tuple of str -- the strings allowed, if the API does not check them itself
-    check : callable, optional -- ``check(value) -> None or str``: the end of a message, after ``path = value``
-    table : Table, optional -- the keys of a "table", or of every item of "tables"
-    types : dict of str to Table, optional -- "tables" whose items have a ``type``: the keys of each type
-    maps : str -- where the value goes in the API (documentation)
+        Whether a table must give the key.
+    choices : tuple of str
+        The strings allowed, if the API does not check them itself.
+    check : callable, optional
+        ``check(value) -> None or str``: the end of a message, after ``path = value``.
+    table : Table, optional
+        The keys of a "table", or of every item of "tables".
+    types : dict of str to Table
+        For "tables" whose items have a ``tag``: the keys of each value of the tag.
+    tag : str
+        The key naming an item's type in ``types``: ``type`` for supports, fields and obstacles, ``kind``
+        for bodies.
+    tag_default : str, optional
+        The type of an item without the tag (bodies: ``"tet"``); None: the tag is required.
+    maps : str
+        Where the value goes in the API (documentation).
     """
 
     kind: str
@@ -60,6 +80,8 @@ class Key:
     check: object = None
     table: Table | None = None
     types: dict = field(default_factory=dict)
+    tag: str = "type"
+    tag_default: str | None = None
     maps: str = ""
 
 
@@ -77,6 +99,8 @@ KINDS = {
                and all(map(_is_number, value))),
     "rows": ("an array of [a, b, c] number triples", lambda value: isinstance(value, list) and all(
         isinstance(row, list) and len(row) == 3 and all(map(_is_number, row)) for row in value)),
+    "indices": ("an array of node numbers >= 0", lambda value: isinstance(value, list) and len(value) > 0 and all(
+        isinstance(item, int) and not isinstance(item, bool) and item >= 0 for item in value)),
     "regions": ("a region string or an array of them", lambda value: isinstance(value, str) or (
         isinstance(value, list) and len(value) > 0 and all(isinstance(item, str) for item in value))),
     "table": ("a table", lambda value: isinstance(value, dict)),
@@ -107,6 +131,39 @@ def _one_source(body):
     if "size" in body and "mesh" in body:
         return "gives size with mesh; size is the tet edge length of a shape (a mesh file is already meshed)"
     return None
+
+
+def _one_surface(body):
+    """A lattice body fills one closed surface: a mesh file or a built-in shape."""
+    given = [name for name in ("mesh", "shape") if name in body]
+    if len(given) != 1:
+        return (f"gives {' and '.join(given) or 'neither mesh nor shape'}; expected one of mesh (a closed surface "
+                "file) or shape")
+    return None
+
+
+def _grid_or_mesh(cloth):
+    """A cloth is a grid (width, height, nx, ny) or a triangle mesh file, not both."""
+    grid = [name for name in ("width", "height", "nx", "ny") if name in cloth]
+    if "mesh" in cloth:
+        extra = grid + [name for name in ("origin", "axes", "shear_stiffness") if name in cloth]
+        return f"gives mesh with {extra[0]}; {extra[0]} is a key of a grid cloth (no mesh)" if extra else None
+    missing = [name for name in ("width", "height", "nx", "ny") if name not in cloth]
+    if missing:
+        return f"gives no {', '.join(missing)}; expected a grid (width, height, nx, ny) or mesh (a triangle file)"
+    return None
+
+
+def _one_selection(support):
+    given = [name for name in ("region", "nodes") if name in support]
+    if len(given) != 1:
+        return (f"gives {' and '.join(given) or 'neither region nor nodes'}; expected one of region (by position) "
+                "or nodes (by number)")
+    return None
+
+
+def _fraction(value):
+    return None if 0 < value < 1 else "is not in (0, 1)"
 
 
 def _needs_folder(output):
@@ -149,8 +206,105 @@ BODY = Table({
     "angular_velocity": Key("vector", maps="Body(angular_velocity=) [rad/s]"),
 }, check=_one_source)
 
+# Structures (volspring.structures, volspring.lattice): keys named as their builders' keywords, which check the
+# values (one of a pair of alternatives, > 0, ...); their messages come back with the key path in front.
+_STRUCTURE = {
+    "name": Key("string", maps="the body's name (Model.body_names)"),
+    "velocity": Key("vector", maps="initial velocity of every node [m/s]"),
+}
+STRING = Table({
+    **_STRUCTURE,
+    "start": Key("vector", required=True, maps="string(start) [m]: node 0"),
+    "end": Key("vector", maps="string(end=) [m]: the last node (or length along direction)"),
+    "length": Key("number", maps="string(length=) [m], along direction"),
+    "direction": Key("vector", maps="string(direction=); default down, (0, 0, -1)"),
+    "count": Key("integer", required=True, maps="string(count=): nodes, >= 2"),
+    "linear_density": Key("number", maps="string(linear_density=) [kg/m] (or mass)"),
+    "mass": Key("number", maps="string(mass=) [kg]"),
+    "axial_stiffness": Key("number", maps="string(axial_stiffness=) EA [N] (or stiffness)"),
+    "stiffness": Key("number", maps="string(stiffness=) k of every segment [N/m]"),
+    "tension": Key("number", maps="string(tension=) [N] as built (or rest_length)"),
+    "rest_length": Key("number", maps="string(rest_length=) [m]"),
+    "damping": Key("number", maps="string(damping=) k_d of every segment [N s/m]"),
+    "pluck": Key("vector", maps="initial displacement [m] of the node nearest pluck_at, tapering linearly to 0 at "
+                                "both ends (a triangle)"),
+    "pluck_at": Key("number", check=_fraction, maps="where the pluck's apex is, as a fraction of the string; "
+                                                    "default 0.5"),
+})
+HAIR = Table({
+    **_STRUCTURE,
+    "start": Key("vector", required=True, maps="strand_points(start) [m]: the root, node 0"),
+    "direction": Key("vector", required=True, maps="strand_points(direction): the strand's (the helix axis)"),
+    "length": Key("number", required=True, maps="strand_points(length) [m], arc length"),
+    "count": Key("integer", required=True, maps="strand_points(count): nodes, >= 3"),
+    "curl_radius": Key("number", maps="strand_points(curl_radius=) [m]; default 0, straight"),
+    "curl_pitch": Key("number", maps="strand_points(curl_pitch=) [m] per turn, with curl_radius"),
+    "bending_stiffness": Key("number", required=True, maps="hair(bending_stiffness=) EI [N m^2]"),
+    "axial_stiffness": Key("number", required=True, maps="hair(axial_stiffness=) EA [N]"),
+    "linear_density": Key("number", maps="hair(linear_density=) [kg/m] (or mass)"),
+    "mass": Key("number", maps="hair(mass=) [kg]"),
+    "torsional_stiffness": Key("number", maps="hair(torsional_stiffness=) GJ [N m^2]; default EI / 1.3"),
+    "damping": Key("number", maps="hair(damping=) k_d of every segment [N s/m]"),
+    "root": Key("string", "clamped", choices=("clamped", "free"),
+                maps="hair(root=): clamped (pin nodes 0 and 1 with a support) or free"),
+})
+STRAIN_LIMIT = Table({
+    "tau": Key("number", required=True, maps="cloth_strain_limit(tau): largest stretch (l - l0) / l0 [-]"),
+    "iterations": Key("integer", maps="cloth_strain_limit(iterations=); default 20"),
+    "tolerance": Key("number", maps="cloth_strain_limit(tolerance=) [-]"),
+    "compression": Key("number", maps="cloth_strain_limit(compression=) [-]"),
+})
+SELF_CONTACT = Table({
+    "thickness": Key("number", required=True, maps="ClothSelfContactForce(thickness=) [m]"),
+    "stiffness": Key("number", required=True, maps="ClothSelfContactForce(stiffness=) k_c [N/m]"),
+    "friction": Key("number", maps="ClothSelfContactForce(friction=) mu"),
+    "damping_ratio": Key("number", maps="ClothSelfContactForce(damping_ratio=)"),
+})
+CLOTH = Table({
+    **_STRUCTURE,
+    "width": Key("number", maps="cloth_grid(width) [m]"),
+    "height": Key("number", maps="cloth_grid(height) [m]"),
+    "nx": Key("integer", maps="cloth_grid(nx): cells along the width"),
+    "ny": Key("integer", maps="cloth_grid(ny): cells along the height"),
+    "origin": Key("vector", maps="cloth_grid(origin=) [m]: corner node 0"),
+    "axes": Key("rows", maps="cloth_grid(axes=): [[width direction], [height direction]]"),
+    "mesh": Key("string", maps="cloth_mesh(points, triangles) of a triangle surface file, relative to the scene"),
+    "units": Key("string", "m", choices=tuple(UNITS), maps="length unit of mesh"),
+    "scale": Key("number", check=_positive, maps="a further factor on mesh"),
+    "areal_density": Key("number", maps="areal_density= [kg/m^2] (or mass)"),
+    "mass": Key("number", maps="mass= [kg]"),
+    "membrane_stiffness": Key("number", maps="membrane_stiffness= E t [N/m] (or stretch_stiffness)"),
+    "stretch_stiffness": Key("number", maps="stretch_stiffness= k of every structural spring [N/m]"),
+    "shear_stiffness": Key("number", maps="cloth_grid(shear_stiffness=) [N/m], with stretch_stiffness"),
+    "bend_stiffness": Key("number", maps="bend_stiffness= [N/m]"),
+    "damping": Key("number", maps="damping= k_d of every spring [N s/m]"),
+    "strain_limit": Key("table", table=STRAIN_LIMIT, maps="Scene(constraints=[cloth_strain_limit(...)])"),
+    "self_contact": Key("table", table=SELF_CONTACT, maps="ClothSelfContactForce(model, triangles, ...)"),
+}, check=_grid_or_mesh)
+LATTICE = Table({
+    **_STRUCTURE,
+    "shape": Key("string", maps="lattice_body(Shape) of a built-in shape NAME:D1,D2,..., in units"),
+    "mesh": Key("string", maps="lattice_body(surface) of a closed surface file, relative to the scene file"),
+    "units": Key("string", "m", choices=tuple(UNITS), maps="length unit of mesh/shape, cell_size, surface_size"),
+    "scale": Key("number", check=_positive, maps="a further factor on mesh/shape"),
+    "cell_size": Key("number", required=True, check=_positive, maps="lattice_body(cell_size) in units"),
+    "material": Key("table", {}, table=MATERIAL, maps="Material(E=, nu=, density=)"),
+    "shear": Key("bool", maps="lattice_body(shear=); default true"),
+    "bend": Key("bool", maps="lattice_body(bend=); default true"),
+    "angles": Key("bool", maps="lattice_body(angles=); default false (nu_eff = 1/4)"),
+    "samples": Key("integer", maps="lattice_body(samples=)"),
+    "damping_ratio": Key("number", maps="lattice_body(damping_ratio=); default none"),
+    "surface_size": Key("number", check=_positive, maps="lattice_body(surface_size=) of a shape, in units"),
+    "translation": Key("vector", maps="x' = R x + translation [m], of the surface before it is filled"),
+    "rotation": Key("vector", maps="R: angles [deg] about x, then y, then z (fixed axes)"),
+}, check=_one_surface)
+#: kind -> the keys of a body of that kind; "tet" (the default) is a meshed body (Body, Model.from_bodies).
+BODY_KINDS = {"tet": BODY, "string": STRING, "hair": HAIR, "cloth": CLOTH, "lattice": LATTICE}
+
 _WHERE = {  # where a support acts: the nodes of a region (as --pin takes it), of one body or of all
-    "region": Key("regions", required=True, maps="parse_region(text) of each; their union"),
+    "region": Key("regions", maps="parse_region(text) of each; their union (or nodes)"),
+    "nodes": Key("indices", maps="node numbers: of bodies[body] as its builder numbers them (a string's from its "
+                                 "start, a cloth grid's j (nx + 1) + i), or of the scene without body"),
     "body": Key("integer", maps="only this body's nodes (bodies[body]); default all"),
     "units": Key("string", "m", choices=tuple(UNITS), maps="unit of the region's numbers"),
 }
@@ -159,10 +313,12 @@ _MOTION = {
     "velocity": Key("vector", maps="... + velocity * t [m/s]"),
 }
 SUPPORT_TYPES = {
-    "pin": Table({**_WHERE, **_MOTION}),
-    "sliding": Table({**_WHERE, "normal": Key("string", required=True, maps="Sliding(nodes, normal): x, y or z")}),
+    "pin": Table({**_WHERE, **_MOTION}, check=_one_selection),
+    "sliding": Table({**_WHERE, "normal": Key("string", required=True, maps="Sliding(nodes, normal): x, y or z")},
+                     check=_one_selection),
     "prescribed": Table({**_WHERE, "components": Key("string", required=True, maps="Prescribed(components=): "
-                                                                                     "letters of xyz"), **_MOTION}),
+                                                                                     "letters of xyz"), **_MOTION},
+                        check=_one_selection),
 }
 
 _POINT_FIELD = Table({
@@ -197,6 +353,8 @@ _PENALTY = {  # ContactForce and ObstacleContactForce keywords; the classes chec
     "stiffness_factor": Key("number", maps="stiffness_factor= alpha of k_c = alpha E_eff l"),
     "damping_ratio": Key("number", maps="damping_ratio="),
 }
+_THICKNESS = Key("number", maps="ObstacleContactForce(thickness=) [m]: contact layer of thin bodies (a cloth's "
+                                "half-thickness, a string's radius); penalty only")
 OBSTACLE_TYPES = {
     "plane": Table({
         "point": Key("vector", [0.0, 0.0, 0.0], maps="HalfSpace(point=) [m]"),
@@ -204,6 +362,16 @@ OBSTACLE_TYPES = {
         "response": Key("string", "penalty", choices=("penalty", "projection"),
                         maps="ObstacleContactForce (penalty) or Scene(obstacles=) (projection)"),
         "restitution": Key("number", maps="HalfSpace(restitution=), projection only"),
+        "thickness": _THICKNESS,
+        **_PENALTY,
+    }),
+    "shape": Table({
+        "shape": Key("string", required=True, maps="a built-in shape NAME:D1,D2,... as a rigid StaticTriangleMesh"),
+        "size": Key("number", check=_positive, maps="Shape.surface(size=): edge length, in units; default a "
+                                                    "twentieth of the extent"),
+        "units": Key("string", "m", choices=tuple(UNITS), maps="length unit of shape and size"),
+        "translation": Key("vector", maps="where the shape's centre is [m]"),
+        "thickness": _THICKNESS,
         **_PENALTY,
     }),
 }
@@ -215,6 +383,12 @@ CONTACT = Table({
     "self_collision": Key("bool", maps="ContactForce(self_collision=)"),
     "edges": Key("bool", maps="ContactForce(edges=)"),
     "method": Key("string", maps="ContactForce(method=): consistent or closest_surface"),
+})
+
+THIN_CONTACT = Table({  # ThinContactForce keywords
+    "thickness": Key("number", required=True, maps="ThinContactForce(thickness=) [m]"),
+    **_PENALTY,
+    "friction_velocity": Key("number", maps="ThinContactForce(friction_velocity=) [m/s]"),
 })
 
 INTEGRATOR = Table({
@@ -239,11 +413,15 @@ OUTPUT = Table({
 SCENE = Table({
     "description": Key("string", maps="free text"),
     "duration": Key("number", 1.0, check=_at_least(0), maps="simulate(duration=) [s]; --duration default"),
-    "bodies": Key("tables", required=True, table=BODY, maps="Model.from_bodies([Body(...), ...])"),
+    "bodies": Key("tables", required=True, table=BODY, types=BODY_KINDS, tag="kind", tag_default="tet",
+                  maps="Model.from_bodies([Body(...), ...]), then structures.combine with strings, hair, cloths "
+                       "and lattices (tet bodies first)"),
     "supports": Key("tables", [], types=SUPPORT_TYPES, maps="Scene(pins=, supports=)"),
     "fields": Key("tables", [], types=FIELD_TYPES, maps="Scene(forces=[...])"),
     "obstacles": Key("tables", [], types=OBSTACLE_TYPES, maps="ObstacleContactForce or Scene(obstacles=)"),
     "contact": Key("table", table=CONTACT, maps="ContactForce(model, ...) between (and within) bodies"),
+    "thin_contact": Key("table", table=THIN_CONTACT, maps="ThinContactForce(model, ...): strings, hair, cloths "
+                                                         "and lattices against the tet bodies"),
     "integrator": Key("table", {}, table=INTEGRATOR),
     "output": Key("table", {}, table=OUTPUT),
 })
@@ -339,11 +517,11 @@ def _value(value, key: Key, path: str):
 def _typed(item: dict, key: Key, path: str) -> dict:
     if not key.types:
         return _table(item, key.table, path)
-    kind = item.get("type")
-    if kind not in key.types:
-        got = "is missing" if kind is None else f"= {shown(kind)} is not a known type"
-        close = difflib.get_close_matches(str(kind), list(key.types), n=1) if isinstance(kind, str) else []
+    kind = item.get(key.tag, key.tag_default)
+    if not isinstance(kind, str) or kind not in key.types:
+        got = "is missing" if kind is None else f"= {shown(kind)} is not a known {key.tag}"
+        close = difflib.get_close_matches(kind, list(key.types), n=1) if isinstance(kind, str) else []
         hint = f"; did you mean {close[0]}?" if close else ""
-        raise SceneFileError(f"{path}.type {got}{hint} (known: {', '.join(key.types)})")
-    rest = {name: value for name, value in item.items() if name != "type"}
-    return {"type": kind, **_table(rest, key.types[kind], path)}
+        raise SceneFileError(f"{path}.{key.tag} {got}{hint} (known: {', '.join(key.types)})")
+    rest = {name: value for name, value in item.items() if name != key.tag}
+    return {key.tag: kind, **_table(rest, key.types[kind], path)}
