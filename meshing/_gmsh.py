@@ -16,8 +16,10 @@ def gmsh_session(*, verbose: bool = False, model: str = "volspring"):
 
     Parameters
     ----------
-    verbose : bool -- let gmsh print its progress to the terminal (off by default)
-    model : str -- name of the model added for the session
+    verbose : bool
+        let gmsh print its progress to the terminal (off by default)
+    model : str
+        name of the model added for the session
 
     Raises
     ------

@@ -88,11 +88,13 @@ class WeightedAnchor:
 
         Parameters
         ----------
-        x : (n, 3) or (..., n, 3) float -- node positions [m]; leading axes are a batch (e.g. frames)
+        x : (n, 3) or (..., n, 3) float
+            node positions [m]; leading axes are a batch (e.g. frames)
 
         Returns
         -------
-        (p, 3) or (..., p, 3) float -- the surface vertices [m]
+        (p, 3) or (..., p, 3) float
+            the surface vertices [m]
         """
         x = np.asarray(x, dtype=np.float64)
         if x.ndim < 2 or x.shape[-2:] != (self.node_count, 3):
@@ -110,15 +112,23 @@ class Anchor(WeightedAnchor):
 
     Parameters
     ----------
-    tet_index : (p,) int64 -- the tet each surface vertex is bound to
-    nodes : (p, 4) int64 -- that tet's node indices (``tet_mesh.tets[tet_index]``)
-    weights : (p, 4) float64 -- barycentric weights in that tet; each row sums to 1, negative entries only for
-        vertices outside the mesh (extrapolated)
-    points : (p, 3) float64 -- the surface vertices at rest [m]
-    faces : (k, 3) int64 or None -- the render surface's triangles, if it was given as a mesh
-    outside : (p,) bool -- vertices inside no tet (within the barycentric tolerance)
-    outside_distance : (p,) float64 -- distance from each vertex to the tet mesh [m]; 0 inside
-    node_count : int -- number of nodes of the tet mesh, checked by :meth:`deform`
+    tet_index : (p,) int64
+        the tet each surface vertex is bound to
+    nodes : (p, 4) int64
+        that tet's node indices (``tet_mesh.tets[tet_index]``)
+    weights : (p, 4) float64
+        barycentric weights in that tet; each row sums to 1, negative entries only for vertices outside the mesh
+        (extrapolated)
+    points : (p, 3) float64
+        the surface vertices at rest [m]
+    faces : (k, 3) int64 or None
+        the render surface's triangles, if it was given as a mesh
+    outside : (p,) bool
+        vertices inside no tet (within the barycentric tolerance)
+    outside_distance : (p,) float64
+        distance from each vertex to the tet mesh [m]; 0 inside
+    node_count : int
+        number of nodes of the tet mesh, checked by :meth:`deform`
     """
 
     tet_index: np.ndarray
@@ -138,13 +148,16 @@ def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = ON_SURFACE, max_dis
 
     Parameters
     ----------
-    tet_mesh : TetMesh -- the volumetric body at rest
-    surface : trimesh.Trimesh or (p, 3) float -- the render surface (its ``vertices`` and ``faces``) or bare
-        vertex positions [m]
-    tolerance : float -- a vertex counts as inside a tet when all its barycentric weights are >= -tolerance
-        (round-off of vertices on faces); default :data:`meshing.tolerances.ON_SURFACE` (1e-9)
-    max_distance : float or None -- refuse vertices farther than this outside the tet mesh [m]; None (default)
-        anchors every vertex, however far, and logs a warning past one mean tet size
+    tet_mesh : TetMesh
+        the volumetric body at rest
+    surface : trimesh.Trimesh or (p, 3) float
+        the render surface (its ``vertices`` and ``faces``) or bare vertex positions [m]
+    tolerance : float
+        a vertex counts as inside a tet when all its barycentric weights are >= -tolerance (round-off of vertices on
+        faces); default :data:`meshing.tolerances.ON_SURFACE` (1e-9)
+    max_distance : float or None
+        refuse vertices farther than this outside the tet mesh [m]; None (default) anchors every vertex, however far,
+        and logs a warning past one mean tet size
 
     Returns
     -------

@@ -90,10 +90,14 @@ class Lattice:
 
     Parameters
     ----------
-    origin : (3,) float -- position of grid node (0, 0, 0) [m]
-    cell_size : float -- edge of the cubic cells [m]
-    cells : (c, 3) int64 -- grid index (i, j, k) of each cell's lowest corner, lexicographically sorted
-    fractions : (c,) float64 -- inside volume fraction of each cell, in (0, 1]
+    origin : (3,) float
+        position of grid node (0, 0, 0) [m]
+    cell_size : float
+        edge of the cubic cells [m]
+    cells : (c, 3) int64
+        grid index (i, j, k) of each cell's lowest corner, lexicographically sorted
+    fractions : (c,) float64
+        inside volume fraction of each cell, in (0, 1]
     """
 
     origin: np.ndarray
@@ -210,16 +214,22 @@ class Lattice:
 
         Parameters
         ----------
-        shear : bool -- include the face and body diagonals
-        bend : bool -- include the skip-one (bend) springs
+        shear : bool
+            include the face and body diagonals
+        bend : bool
+            include the skip-one (bend) springs
 
         Returns
         -------
-        pairs : (s, 2) int64 -- node pairs (i < j), grouped by family in the order of :data:`LATTICE_FAMILIES`
-        family : (s,) int8 -- index into :data:`LATTICE_FAMILIES`
-        weights : (s,) float64 -- each spring's share of cells (1 inside the body)
-        bend_slots : (s,) float64 -- for structural springs, how many of the two bend springs that would cover
-            the edge in an unbounded lattice are missing (0, 1 or 2), times the edge's weight; 0 for the rest
+        pairs : (s, 2) int64
+            node pairs (i < j), grouped by family in the order of :data:`LATTICE_FAMILIES`
+        family : (s,) int8
+            index into :data:`LATTICE_FAMILIES`
+        weights : (s,) float64
+            each spring's share of cells (1 inside the body)
+        bend_slots : (s,) float64
+            for structural springs, how many of the two bend springs that would cover the edge in an unbounded lattice
+            are missing (0, 1 or 2), times the edge's weight; 0 for the rest
         """
         families = [self._cell_pairs(1)] + ([self._cell_pairs(2), self._cell_pairs(3)] if shear else [])
         edges, edge_weights = families[0]
@@ -267,8 +277,10 @@ class Lattice:
 
         Returns
         -------
-        triples : (e, 3) int64 -- each joint once (i < k)
-        weights : (e,) float64 -- share of the cells holding the face: 1 inside the body, 1/2 on its boundary
+        triples : (e, 3) int64
+            each joint once (i < k)
+        weights : (e,) float64
+            share of the cells holding the face: 1 inside the body, 1/2 on its boundary
         """
         triples = self.cell_nodes[:, _JOINTS]  # (c, 24, 3)
         triples = triples.reshape(-1, 3)
@@ -301,9 +313,12 @@ def box_lattice(cells, size, *, origin=(0.0, 0.0, 0.0)) -> Lattice:
 
     Parameters
     ----------
-    cells : (3,) int -- cells along x, y, z, each >= 1
-    size : (3,) float -- box edges [m]; ``size / cells`` must be one cell size (cubic cells)
-    origin : (3,) float -- the box's lowest corner [m]
+    cells : (3,) int
+        cells along x, y, z, each >= 1
+    size : (3,) float
+        box edges [m]; ``size / cells`` must be one cell size (cubic cells)
+    origin : (3,) float
+        the box's lowest corner [m]
     """
     cells = np.array([int(c) for c in cells], dtype=np.int64)
     size = np.asarray(size, dtype=np.float64)
@@ -321,10 +336,13 @@ def voxelize(surface, cell_size: float, *, samples: int = 4) -> Lattice:
 
     Parameters
     ----------
-    surface : trimesh.Trimesh -- closed, outward-wound [m]
-    cell_size : float -- edge of the cells [m]
-    samples : int -- sub-grid points per axis that sample each boundary cell's inside fraction (>= 1;
-        the fraction's resolution is 1 / samples^3)
+    surface : trimesh.Trimesh
+        closed, outward-wound [m]
+    cell_size : float
+        edge of the cells [m]
+    samples : int
+        sub-grid points per axis that sample each boundary cell's inside fraction (>= 1; the fraction's resolution is
+        1 / samples^3)
 
     Returns
     -------
@@ -390,15 +408,23 @@ class LatticeAnchor(WeightedAnchor):
 
     Parameters
     ----------
-    cell_index : (p,) int64 -- the lattice cell each surface vertex is bound to
-    nodes : (p, 8) int64 -- that cell's corner nodes (``lattice.cell_nodes[cell_index]``)
-    weights : (p, 8) float64 -- trilinear weights in that cell; each row sums to 1, entries outside [0, 1]
-        only for vertices outside every kept cell (extrapolated)
-    points : (p, 3) float64 -- the surface vertices at rest [m]
-    faces : (k, 3) int64 or None -- the render surface's triangles, if it was given as a mesh
-    outside : (p,) bool -- vertices in no kept cell
-    outside_distance : (p,) float64 -- distance from each vertex to its cell [m]; 0 inside
-    node_count : int -- nodes of the lattice, checked by :meth:`deform`
+    cell_index : (p,) int64
+        the lattice cell each surface vertex is bound to
+    nodes : (p, 8) int64
+        that cell's corner nodes (``lattice.cell_nodes[cell_index]``)
+    weights : (p, 8) float64
+        trilinear weights in that cell; each row sums to 1, entries outside [0, 1] only for vertices outside every kept
+        cell (extrapolated)
+    points : (p, 3) float64
+        the surface vertices at rest [m]
+    faces : (k, 3) int64 or None
+        the render surface's triangles, if it was given as a mesh
+    outside : (p,) bool
+        vertices in no kept cell
+    outside_distance : (p,) float64
+        distance from each vertex to its cell [m]; 0 inside
+    node_count : int
+        nodes of the lattice, checked by :meth:`deform`
     """
 
     cell_index: np.ndarray
@@ -419,7 +445,8 @@ def anchor_lattice(lattice: Lattice, surface) -> LatticeAnchor:
     Parameters
     ----------
     lattice : Lattice
-    surface : trimesh.Trimesh or (p, 3) float -- the render surface or bare vertex positions [m]
+    surface : trimesh.Trimesh or (p, 3) float
+        the render surface or bare vertex positions [m]
 
     Returns
     -------

@@ -29,9 +29,10 @@ class TetMesh:
 
     Parameters
     ----------
-    points : (n, 3) float64 -- node positions [m]
-    tets : (m, 4) int64 -- node indices of each tet, positively oriented
-        (``det[x1 - x0, x2 - x0, x3 - x0] > 0``)
+    points : (n, 3) float64
+        node positions [m]
+    tets : (m, 4) int64
+        node indices of each tet, positively oriented (``det[x1 - x0, x2 - x0, x3 - x0] > 0``)
 
     Raises
     ------

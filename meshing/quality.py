@@ -90,12 +90,15 @@ def tet_volumes(mesh_or_points, tets=None) -> np.ndarray:
 
     Parameters
     ----------
-    mesh_or_points : TetMesh or (n, 3) float -- a mesh, or node positions [m]
-    tets : (m, 4) int, optional -- node indices, when points are given
+    mesh_or_points : TetMesh or (n, 3) float
+        a mesh, or node positions [m]
+    tets : (m, 4) int, optional
+        node indices, when points are given
 
     Returns
     -------
-    (m,) float -- volumes [m^3], all positive
+    (m,) float
+        volumes [m^3], all positive
 
     Raises
     ------
@@ -110,7 +113,8 @@ def min_dihedral_angles(mesh_or_points, tets=None) -> np.ndarray:
 
     Returns
     -------
-    (m,) float -- angles [degrees]; 70.53 for a regular tet, near 0 for a sliver or needle
+    (m,) float
+        angles [degrees]; 70.53 for a regular tet, near 0 for a sliver or needle
 
     Raises
     ------
@@ -127,7 +131,8 @@ def radius_ratios(mesh_or_points, tets=None) -> np.ndarray:
 
     Returns
     -------
-    (m,) float -- 1 for a regular tet, tending to 0 as the tet degenerates
+    (m,) float
+        1 for a regular tet, tending to 0 as the tet degenerates
 
     Raises
     ------
@@ -153,12 +158,16 @@ class QualitySummary:
     Attributes
     ----------
     tet_count : int
-    volume_min, volume_max, volume_total : float -- tet volumes [m^3]
-    dihedral_min, dihedral_mean, dihedral_p1, dihedral_p5 : float -- minimum dihedral angle per tet, then its
-        minimum, mean, 1st and 5th percentiles over the mesh [degrees]
-    radius_ratio_min, radius_ratio_mean, radius_ratio_p1, radius_ratio_p5 : float -- radius ratio likewise
-    poor_dihedral_count : int -- tets with a dihedral angle below :data:`POOR_DIHEDRAL_DEGREES`
-    poor_radius_ratio_count : int -- tets with a radius ratio below :data:`POOR_RADIUS_RATIO`
+    volume_min, volume_max, volume_total : float
+        tet volumes [m^3]
+    dihedral_min, dihedral_mean, dihedral_p1, dihedral_p5 : float
+        minimum dihedral angle per tet, then its minimum, mean, 1st and 5th percentiles over the mesh [degrees]
+    radius_ratio_min, radius_ratio_mean, radius_ratio_p1, radius_ratio_p5 : float
+        radius ratio likewise
+    poor_dihedral_count : int
+        tets with a dihedral angle below :data:`POOR_DIHEDRAL_DEGREES`
+    poor_radius_ratio_count : int
+        tets with a radius ratio below :data:`POOR_RADIUS_RATIO`
     """
 
     tet_count: int
@@ -194,8 +203,10 @@ def quality_summary(mesh_or_points, tets=None) -> QualitySummary:
 
     Parameters
     ----------
-    mesh_or_points : TetMesh or (n, 3) float -- a mesh, or node positions [m]
-    tets : (m, 4) int, optional -- node indices, when points are given
+    mesh_or_points : TetMesh or (n, 3) float
+        a mesh, or node positions [m]
+    tets : (m, 4) int, optional
+        node indices, when points are given
 
     Raises
     ------

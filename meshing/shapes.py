@@ -34,8 +34,10 @@ class Shape:
 
     Parameters
     ----------
-    name : str -- one of :data:`SHAPE_NAMES`
-    dimensions : tuple of float -- the shape's dimensions [m], in the order of ``parameters``
+    name : str
+        one of :data:`SHAPE_NAMES`
+    dimensions : tuple of float
+        the shape's dimensions [m], in the order of ``parameters``
 
     Examples
     --------
@@ -114,11 +116,13 @@ class Shape:
 
         Parameters
         ----------
-        size : float -- target edge length [m]; vertices lie on the exact shape
+        size : float
+            target edge length [m]; vertices lie on the exact shape
 
         Returns
         -------
-        trimesh.Trimesh -- watertight, outward normals
+        trimesh.Trimesh
+            watertight, outward normals
         """
         if not (math.isfinite(size) and size > 0):
             raise ValueError(f"size = {size} is not a positive finite length")
@@ -443,8 +447,10 @@ def l_bracket_polygon(lx: float, ly: float, thickness: float) -> np.ndarray:
 
     Parameters
     ----------
-    lx, ly : float -- the legs' lengths along x and y [m]
-    thickness : float -- both legs' thickness [m], < lx and ly
+    lx, ly : float
+        the legs' lengths along x and y [m]
+    thickness : float
+        both legs' thickness [m], < lx and ly
     """
     x0, y0 = -lx / 2, -ly / 2
     return np.array([[x0, y0], [lx / 2, y0], [lx / 2, y0 + thickness], [x0 + thickness, y0 + thickness],
@@ -456,10 +462,11 @@ def parse_shape(spec: str) -> Shape:
 
     Parameters
     ----------
-    spec : str -- ``NAME:D1,D2,...`` with NAME one of :data:`SHAPE_NAMES` and its dimensions [m] in order:
-        ``box:lx,ly,lz``, ``sphere:r``, ``cylinder:r,length``, ``torus:R,r``, ``ellipsoid:a,b,c``,
-        ``capsule:r,length`` (see :func:`capsule`), ``l_bracket:lx,ly,thickness,depth`` (see
-        :func:`l_bracket`); e.g. ``"box:1,0.1,0.1"``, ``"torus:0.5,0.15"``, ``"capsule:0.1,0.4"``
+    spec : str
+        ``NAME:D1,D2,...`` with NAME one of :data:`SHAPE_NAMES` and its dimensions [m] in order: ``box:lx,ly,lz``,
+        ``sphere:r``, ``cylinder:r,length``, ``torus:R,r``, ``ellipsoid:a,b,c``, ``capsule:r,length`` (see
+        :func:`capsule`), ``l_bracket:lx,ly,thickness,depth`` (see :func:`l_bracket`); e.g. ``"box:1,0.1,0.1"``,
+        ``"torus:0.5,0.15"``, ``"capsule:0.1,0.4"``
 
     Raises
     ------

@@ -39,9 +39,12 @@ def add_shells(mesh: TetMesh, *, layers: int, thickness: float) -> SpringTopolog
 
     Parameters
     ----------
-    mesh : TetMesh -- the volumetric body; its boundary faces (wound outward) are the surface that is offset
-    layers : int -- number of shell layers, >= 0; 0 gives the tet edges only
-    thickness : float -- offset between consecutive layers along the vertex normals [m], > 0
+    mesh : TetMesh
+        the volumetric body; its boundary faces (wound outward) are the surface that is offset
+    layers : int
+        number of shell layers, >= 0; 0 gives the tet edges only
+    thickness : float
+        offset between consecutive layers along the vertex normals [m], > 0
 
     Returns
     -------

@@ -40,14 +40,19 @@ def structured_box(cells, size, *, origin=(0.0, 0.0, 0.0), pattern: str = "mirro
 
     Parameters
     ----------
-    cells : (3,) int -- cells along x, y, z, each >= 1
-    size : (3,) float -- box edge lengths [m], each > 0
-    origin : (3,) float -- the corner with the smallest coordinates [m]
-    pattern : {"mirrored", "kuhn"} -- how the cells' splits are oriented (module docstring)
+    cells : (3,) int
+        cells along x, y, z, each >= 1
+    size : (3,) float
+        box edge lengths [m], each > 0
+    origin : (3,) float
+        the corner with the smallest coordinates [m]
+    pattern : {"mirrored", "kuhn"}
+        how the cells' splits are oriented (module docstring)
 
     Returns
     -------
-    TetMesh -- ``prod(cells + 1)`` nodes, ``6 prod(cells)`` positively oriented tets
+    TetMesh
+        ``prod(cells + 1)`` nodes, ``6 prod(cells)`` positively oriented tets
 
     Raises
     ------

@@ -24,14 +24,19 @@ def winding_numbers(vertices, faces, points, *, chunk: int = 2_000_000) -> np.nd
 
     Parameters
     ----------
-    vertices : (n, 3) float -- surface vertices [m]
-    faces : (f, 3) int -- triangles, wound with outward normals
-    points : (k, 3) float -- query points [m]
-    chunk : int -- largest number of (point, face) candidate pairs handled at once (memory bound)
+    vertices : (n, 3) float
+        surface vertices [m]
+    faces : (f, 3) int
+        triangles, wound with outward normals
+    points : (k, 3) float
+        query points [m]
+    chunk : int
+        largest number of (point, face) candidate pairs handled at once (memory bound)
 
     Returns
     -------
-    (k,) int -- 1 inside a simple closed surface, 0 outside (more inside nested or overlapping bodies)
+    (k,) int
+        1 inside a simple closed surface, 0 outside (more inside nested or overlapping bodies)
     """
     vertices = np.asarray(vertices, dtype=np.float64) @ _RAY_FRAME
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3) @ _RAY_FRAME

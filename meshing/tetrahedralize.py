@@ -42,9 +42,10 @@ def excess_volume_fraction(mesh: TetMesh, body) -> float:
 
     Parameters
     ----------
-    mesh : TetMesh -- the tets
-    body : meshing.shapes.Shape, trimesh.Trimesh or float -- the body: a built-in shape (its exact volume), a
-        closed surface (its enclosed volume) or the volume itself [m^3]
+    mesh : TetMesh
+        the tets
+    body : meshing.shapes.Shape, trimesh.Trimesh or float
+        the body: a built-in shape (its exact volume), a closed surface (its enclosed volume) or the volume itself [m^3]
 
     Examples
     --------
@@ -66,9 +67,10 @@ def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | No
 
     Parameters
     ----------
-    surface : trimesh.Trimesh, meshing.shapes.Shape or path-like -- the body; files and meshes go
-        through :func:`meshing.surface.load_surface` (checked and repaired)
-    size : float -- target tet edge length [m]
+    surface : trimesh.Trimesh, meshing.shapes.Shape or path-like
+        the body; files and meshes go through :func:`meshing.surface.load_surface` (checked and repaired)
+    size : float
+        target tet edge length [m]
     method : {"gmsh", "delaunay"}
         ``"gmsh"``: gmsh's Delaunay mesher with Netgen optimisation. A triangle surface is first
         classified (split at edges sharper than ``feature_angle``) and re-created as geometry so
@@ -83,21 +85,26 @@ def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | No
         sag of their facets, so that the tets' boundary lies in a thin sheet above the smooth surface
         and a finer render surface of the same shape lies inside the tets (:func:`excess_volume_fraction`
         reports the sheet's volume; it is logged too).
-    seed : int, optional -- random seed (the lattice jitter; gmsh's ``Mesh.RandomSeed``)
-    feature_angle : float -- dihedral angle [degrees] above which an edge is a sharp feature: gmsh, triangle
-        surfaces: kept as such; delaunay: a crease the enclosing band does not round (faces meeting at a
-        smaller angle sample a curved surface). A smooth scan with coarse facets wants 180.
-    enclosing_band : bool, optional -- delaunay only: move the surface vertices outward by 1.5 x the
-        estimated chord sag of their facets (curvature from normals; flat facets and creases do not move),
-        so that the tets enclose the smooth shape the facets are chords of; ``False`` keeps the surface
-        vertices on the input surface (the tets' boundary is then the input facets). Default (None): on for
-        built-in shapes, off for loaded surfaces (on the coarse bunny it keeps the OBJ's vertices inside the
-        tets but adds 10% of volume: its sag estimate on coarse facets is large). gmsh's meshes are not affected.
-    verbose : bool -- let gmsh print its progress
+    seed : int, optional
+        random seed (the lattice jitter; gmsh's ``Mesh.RandomSeed``)
+    feature_angle : float
+        dihedral angle [degrees] above which an edge is a sharp feature: gmsh, triangle surfaces: kept as such;
+        delaunay: a crease the enclosing band does not round (faces meeting at a smaller angle sample a curved surface).
+        A smooth scan with coarse facets wants 180.
+    enclosing_band : bool, optional
+        delaunay only: move the surface vertices outward by 1.5 x the estimated chord sag of their facets (curvature
+        from normals; flat facets and creases do not move), so that the tets enclose the smooth shape the facets are
+        chords of; ``False`` keeps the surface vertices on the input surface (the tets' boundary is then the input
+        facets). Default (None): on for built-in shapes, off for loaded surfaces (on the coarse bunny it keeps the OBJ's
+        vertices inside the tets but adds 10% of volume: its sag estimate on coarse facets is large). gmsh's meshes are
+        not affected.
+    verbose : bool
+        let gmsh print its progress
 
     Returns
     -------
-    TetMesh -- positively oriented tets, no unused nodes
+    TetMesh
+        positively oriented tets, no unused nodes
 
     Raises
     ------

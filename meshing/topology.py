@@ -45,14 +45,20 @@ class SpringTopology:
 
     Parameters
     ----------
-    mesh : TetMesh -- the volumetric body
-    points : (n, 3) float -- rest positions of all nodes, mesh nodes first [m]
-    springs : (s, 2) int -- node pairs joined by a spring
-    kinds : (s,) int -- index into :data:`SPRING_KINDS` of each spring
-    shell_triangles : (f, 3) int -- triangles of every shell layer (global node indices), used to
-        give shell nodes a mass; empty without shells
-    shell_layer : (n,) int -- 0 for mesh nodes, k for nodes of the k-th shell layer
-    shell_thickness : float -- offset between consecutive layers [m]; 0 without shells
+    mesh : TetMesh
+        the volumetric body
+    points : (n, 3) float
+        rest positions of all nodes, mesh nodes first [m]
+    springs : (s, 2) int
+        node pairs joined by a spring
+    kinds : (s,) int
+        index into :data:`SPRING_KINDS` of each spring
+    shell_triangles : (f, 3) int
+        triangles of every shell layer (global node indices), used to give shell nodes a mass; empty without shells
+    shell_layer : (n,) int
+        0 for mesh nodes, k for nodes of the k-th shell layer
+    shell_thickness : float
+        offset between consecutive layers [m]; 0 without shells
 
     Examples
     --------

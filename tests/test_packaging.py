@@ -1,4 +1,5 @@
-"""Packaging: every third-party module the code imports is a declared dependency, and every module imports.
+"""Packaging: every third-party module the code imports is a declared dependency, every module imports, and
+the PEP 561 markers (py.typed) ship.
 
 The README's test line installs into a brand-new virtual environment (``.ci/run`` runs it), so an
 undeclared dependency fails there too; these tests name the culprit directly.
@@ -6,6 +7,7 @@ undeclared dependency fails there too; these tests name the culprit directly.
 
 import ast
 import importlib.metadata
+import json
 import pathlib
 import re
 import subprocess
@@ -77,3 +79,30 @@ def test_every_module_imports_from_an_empty_folder(package, tmp_path):
     code = "import importlib, sys\nfor name in sys.argv[1:]:\n    importlib.import_module(name)\n"
     done = subprocess.run([sys.executable, "-c", code, *modules], cwd=tmp_path, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-2000:]
+
+
+def _installed_distribution():
+    """The installed volspring distribution (its .dist-info), not the ``volspring.egg-info`` an in-tree build
+    leaves in the checkout: that one is found first from the repository root, and lists source files."""
+    path = [entry for entry in sys.path if entry and pathlib.Path(entry).resolve() != ROOT]
+    found = [dist for dist in importlib.metadata.distributions(name="volspring", path=path)
+             if dist.files is not None and not any(file.parts[0].endswith(".egg-info") for file in dist.files)]
+    if not found:
+        pytest.skip("volspring is not installed (pip install .)")
+    return found[0]
+
+
+def test_the_packages_carry_py_typed():
+    # PEP 561: a py.typed marker in each import package tells type checkers to read its annotations.
+    assert [package for package in PACKAGES if not (ROOT / package / "py.typed").is_file()] == []
+
+
+def test_the_installed_distribution_ships_py_typed():
+    # The markers are package data: without the entries in pyproject.toml's package-data, setuptools leaves
+    # them out of the wheel and installed copies are untyped for mypy and pyright.
+    distribution = _installed_distribution()
+    direct_url = json.loads(distribution.read_text("direct_url.json") or "{}")
+    if direct_url.get("dir_info", {}).get("editable"):
+        pytest.skip("an editable install lists no package files; the README's `pip install .` (.ci/run) checks it")
+    shipped = {str(file) for file in distribution.files}
+    assert [package for package in PACKAGES if f"{package}/py.typed" not in shipped] == []

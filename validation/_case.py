@@ -31,7 +31,8 @@ class BeamGeometry:
 
     Parameters
     ----------
-    length, width, height : float -- [m]; the section spans y in [0, width], z in [0, height]
+    length, width, height : float
+        [m]; the section spans y in [0, width], z in [0, height]
     """
 
     length: float
@@ -45,21 +46,34 @@ class Case:
 
     Parameters
     ----------
-    name : str -- one of :data:`CASE_NAMES`
-    title : str -- one line for the report
-    kind : {"static", "modes"} -- static equilibrium or vibration frequencies
-    mesh : TetMesh -- rest shape [m]
+    name : str
+        one of :data:`CASE_NAMES`
+    title : str
+        one line for the report
+    kind : {"static", "modes"}
+        static equilibrium or vibration frequencies
+    mesh : TetMesh
+        rest shape [m]
     material : Material
-    clamps : tuple of Clamp -- supports, as :func:`validation.fem.solve_fem_static` takes them
-    gravity : (3,) float or None -- [m/s^2]
-    tractions : tuple of Traction -- surface loads [Pa]
-    tip_nodes : (n,) bool or None -- the nodes whose mean displacement along ``tip_direction``
-        is the case's "tip deflection"; None to take the node the FEM reference moves most
-    tip_direction : (3,) float or None -- unit vector; None as for ``tip_nodes``
-    analytic : dict -- closed-form values, keys with units (``tip_deflection_m``, ...)
-    parameters : dict -- the inputs, keys with units, for results.json
-    beam : BeamGeometry or None -- for the deflection profile along the beam
-    cells : (3,) int or None -- grid cells of a structured mesh
+    clamps : tuple of Clamp
+        supports, as :func:`validation.fem.solve_fem_static` takes them
+    gravity : (3,) float or None
+        [m/s^2]
+    tractions : tuple of Traction
+        surface loads [Pa]
+    tip_nodes : (n,) bool or None
+        the nodes whose mean displacement along ``tip_direction`` is the case's "tip deflection"; None to take the node
+        the FEM reference moves most
+    tip_direction : (3,) float or None
+        unit vector; None as for ``tip_nodes``
+    analytic : dict
+        closed-form values, keys with units (``tip_deflection_m``, ...)
+    parameters : dict
+        the inputs, keys with units, for results.json
+    beam : BeamGeometry or None
+        for the deflection profile along the beam
+    cells : (3,) int or None
+        grid cells of a structured mesh
     """
 
     name: str

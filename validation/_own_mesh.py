@@ -70,11 +70,15 @@ def own_mesh_case(mesh: TetMesh, clamp, *, material: Material, gravity=(0.0, 0.0
     Parameters
     ----------
     mesh : TetMesh
-    clamp : region (callable (k, 3) -> (k,) bool, e.g. from :func:`parse_region`) -- its nodes are held
+    clamp : region (callable (k, 3) -> (k,) bool, e.g. from :func:`parse_region`)
+        its nodes are held
     material : Material
-    gravity : (3,) float or None -- [m/s^2]
-    tractions : sequence of Traction -- [Pa]
-    source : str -- where the mesh came from, for the report
+    gravity : (3,) float or None
+        [m/s^2]
+    tractions : sequence of Traction
+        [Pa]
+    source : str
+        where the mesh came from, for the report
 
     Raises
     ------
@@ -102,7 +106,8 @@ def check_held(mesh: TetMesh, held: np.ndarray) -> None:
     Parameters
     ----------
     mesh : TetMesh
-    held : (n,) bool -- nodes held in place (all components)
+    held : (n,) bool
+        nodes held in place (all components)
 
     Raises
     ------

@@ -59,15 +59,21 @@ def cantilever_end_load_deflection(length: float, width: float, height: float, *
 
     Parameters
     ----------
-    length, width, height : float -- beam length and section [m]; bending is along ``height``
-    E : float -- Young's modulus [Pa]
-    nu : float -- Poisson ratio [-] (enters the shear term only)
-    force : float -- end force across the beam, along ``height`` [N]
-    shear : bool -- add Timoshenko's shear term; False gives Euler-Bernoulli
+    length, width, height : float
+        beam length and section [m]; bending is along ``height``
+    E : float
+        Young's modulus [Pa]
+    nu : float
+        Poisson ratio [-] (enters the shear term only)
+    force : float
+        end force across the beam, along ``height`` [N]
+    shear : bool
+        add Timoshenko's shear term; False gives Euler-Bernoulli
 
     Returns
     -------
-    float -- tip deflection along the force [m]
+    float
+        tip deflection along the force [m]
     """
     _, bending, shear_stiffness = _beam_terms(width, height, E, nu)
     return force * length**3 / (3.0 * bending) + (force * length / shear_stiffness if shear else 0.0)
@@ -80,16 +86,23 @@ def cantilever_self_weight_deflection(length: float, width: float, height: float
 
     Parameters
     ----------
-    length, width, height : float -- [m]; bending is along ``height``
-    E : float -- [Pa]
-    nu : float -- [-]
-    density : float -- [kg/m^3]
-    gravity : float -- magnitude of g, across the beam along ``height`` [m/s^2]
-    shear : bool -- add Timoshenko's shear term; False gives Euler-Bernoulli
+    length, width, height : float
+        [m]; bending is along ``height``
+    E : float
+        [Pa]
+    nu : float
+        [-]
+    density : float
+        [kg/m^3]
+    gravity : float
+        magnitude of g, across the beam along ``height`` [m/s^2]
+    shear : bool
+        add Timoshenko's shear term; False gives Euler-Bernoulli
 
     Returns
     -------
-    float -- tip deflection [m]
+    float
+        tip deflection [m]
     """
     area, bending, shear_stiffness = _beam_terms(width, height, E, nu)
     q = density * gravity * area
@@ -132,16 +145,20 @@ def cantilever_frequencies(length: float, width: float, height: float, *, E: flo
 
     Parameters
     ----------
-    length, width, height : float -- [m]; bending along ``height`` (the ``width`` direction has its
-        own family with width and height swapped)
-    E : float -- [Pa]
-    density : float -- [kg/m^3]
-    count : int -- number of frequencies
+    length, width, height : float
+        [m]; bending along ``height`` (the ``width`` direction has its own family with width and height swapped)
+    E : float
+        [Pa]
+    density : float
+        [kg/m^3]
+    count : int
+        number of frequencies
 
     Returns
     -------
-    (count,) float -- [Hz]; they neglect shear and rotary inertia, so they run high by about
-        (beta_n h / L)^2 relative terms, which grows with n.
+    (count,) float
+        [Hz]; they neglect shear and rotary inertia, so they run high by about (beta_n h / L)^2 relative terms, which
+        grows with n.
     """
     area, bending, _ = _beam_terms(width, height, E, 0.0)
     return cantilever_wavenumbers(count) ** 2 / (2.0 * np.pi * length**2) * np.sqrt(bending / (density * area))

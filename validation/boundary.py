@@ -55,10 +55,11 @@ class Clamp:
     Parameters
     ----------
     region : callable (k, 3) float -> (k,) bool, or :class:`Box`, or (2, 3) float box corners [m]
-    components : str or sequence of int -- the fixed components: ``"xyz"`` (all, the default),
-        ``"x"`` for a sliding/symmetry support that fixes u_x only, or indices such as ``(0, 2)``
-    displacement : (3,) float or callable (k, 3) float -> (k, 3) float -- prescribed value [m] of
-        the fixed components (zero by default); a callable is evaluated at the dof locations
+    components : str or sequence of int
+        the fixed components: ``"xyz"`` (all, the default), ``"x"`` for a sliding/symmetry support that fixes u_x only,
+        or indices such as ``(0, 2)``
+    displacement : (3,) float or callable (k, 3) float -> (k, 3) float
+        prescribed value [m] of the fixed components (zero by default); a callable is evaluated at the dof locations
 
     Notes
     -----
@@ -91,8 +92,10 @@ class Traction:
 
     Parameters
     ----------
-    region : as for :class:`Clamp` -- a boundary face is loaded when its three nodes are in it
-    vector : (3,) float -- force per area [Pa]
+    region : as for :class:`Clamp`
+        a boundary face is loaded when its three nodes are in it
+    vector : (3,) float
+        force per area [Pa]
     """
 
     region: object

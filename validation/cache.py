@@ -170,9 +170,15 @@ def cached_solve_static(mesh, material, *, folder=None, **arguments) -> fem.Stat
 
     Parameters
     ----------
-    folder : path, optional -- cache folder, default :func:`default_folder`
-    **arguments -- as for :func:`validation.fem.solve_fem_static` (``solver`` and ``tolerance`` are not part
-        of the key: they change the answer only within the solver tolerance)
+    mesh : TetMesh
+        as for :func:`validation.fem.solve_fem_static`
+    material : (E, nu, density)
+        as for :func:`validation.fem.solve_fem_static`
+    folder : path, optional
+        cache folder, default :func:`default_folder`
+    **arguments
+        as for :func:`validation.fem.solve_fem_static` (``solver`` and ``tolerance`` are not part of the key: they
+        change the answer only within the solver tolerance)
     """
     return _cached("static", fem.solve_fem_static, fem.StaticSolution, mesh, material, folder, arguments)
 

@@ -198,12 +198,15 @@ def beam_deflection_profile(case: Case, x) -> np.ndarray:
 
     Parameters
     ----------
-    case : Case -- ``cantilever_gravity`` or ``cantilever_end_load``
-    x : (k,) float -- positions along the beam [m]
+    case : Case
+        ``cantilever_gravity`` or ``cantilever_end_load``
+    x : (k,) float
+        positions along the beam [m]
 
     Returns
     -------
-    (k,) float -- [m]
+    (k,) float
+        [m]
     """
     beam, material = case.beam, case.material
     if beam is None:
@@ -250,9 +253,12 @@ def beam_cells(length: float, height: float, per_height: int, *, width: float | 
 
     Parameters
     ----------
-    length, height : float -- [m]
-    per_height : int -- cells across the height (>= 1)
-    width : float, optional -- [m]; default ``height``
+    length, height : float
+        [m]
+    per_height : int
+        cells across the height (>= 1)
+    width : float, optional
+        [m]; default ``height``
 
     Returns
     -------

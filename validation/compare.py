@@ -139,13 +139,19 @@ def compare_static(case: Case, *, rules=RULES, models=(), elements=("P2", "P1"),
 
     Parameters
     ----------
-    case : Case -- ``kind == "static"``
-    rules : sequence of str -- spring stiffness rules (:data:`RULES`); results in ``results["springs"]``
-    models : sequence of str -- of :data:`validation.springs.VALIDATED_MODELS`; results in ``results["models"]``
-        (a refused rung: ``{"refused": message}``)
-    elements : sequence of {"P2", "P1"} -- the first is the reference
-    folder : path, optional -- FEM cache folder (:func:`validation.cache.default_folder`)
-    progress : callable, optional -- ``progress(message)`` before each solve
+    case : Case
+        ``kind == "static"``
+    rules : sequence of str
+        spring stiffness rules (:data:`RULES`); results in ``results["springs"]``
+    models : sequence of str
+        of :data:`validation.springs.VALIDATED_MODELS`; results in ``results["models"]`` (a refused rung: ``{"refused":
+        message}``)
+    elements : sequence of {"P2", "P1"}
+        the first is the reference
+    folder : path, optional
+        FEM cache folder (:func:`validation.cache.default_folder`)
+    progress : callable, optional
+        ``progress(message)`` before each solve
 
     Returns
     -------

@@ -85,8 +85,8 @@ def elastic_constants(material) -> tuple[float, float, float]:
 
     Parameters
     ----------
-    material : object with ``.E``, ``.nu``, ``.density``, or a mapping with those keys, or a tuple
-        ``(E, nu, density)`` -- E [Pa], nu [-], density [kg/m^3]
+    material : object with ``.E``, ``.nu``, ``.density``, or a mapping with those keys, or a tuple ``(E, nu, density)``
+        E [Pa], nu [-], density [kg/m^3]
 
     Returns
     -------
@@ -125,17 +125,22 @@ class StaticSolution:
 
     Attributes
     ----------
-    displacement : (n, 3) float -- displacement of each mesh node [m] (P2, TH: the vertex dofs)
-    volume_change : float -- linearised volume change, the integral of div u over the mesh [m^3],
-        exact for the finite-element field (it equals the flux of u through the boundary)
-    deformed_volume_change : float -- volume of the mesh with its nodes moved by ``displacement``
-        minus its rest volume [m^3]: what a node-based model (springs) measures; it differs from
-        ``volume_change`` by O(|grad u|^2) terms, and for P2 and TH it ignores the edge dofs
-    reaction_force : (3,) float -- total force the clamps exert on the body [N]; at equilibrium
-        minus the total applied load
-    dofs : (N,) float -- the whole finite-element displacement vector, in scikit-fem's dof order [m]
-        (TH: its P2 displacement; the pressure is not kept)
-    element : str -- ``"P1"``, ``"P2"`` or ``"TH"``
+    displacement : (n, 3) float
+        displacement of each mesh node [m] (P2, TH: the vertex dofs)
+    volume_change : float
+        linearised volume change, the integral of div u over the mesh [m^3], exact for the finite-element field (it
+        equals the flux of u through the boundary)
+    deformed_volume_change : float
+        volume of the mesh with its nodes moved by ``displacement`` minus its rest volume [m^3]: what a node-based model
+        (springs) measures; it differs from ``volume_change`` by O(|grad u|^2) terms, and for P2 and TH it ignores the
+        edge dofs
+    reaction_force : (3,) float
+        total force the clamps exert on the body [N]; at equilibrium minus the total applied load
+    dofs : (N,) float
+        the whole finite-element displacement vector, in scikit-fem's dof order [m] (TH: its P2 displacement; the
+        pressure is not kept)
+    element : str
+        ``"P1"``, ``"P2"`` or ``"TH"``
     info : ReferenceInfo
     """
 
@@ -154,26 +159,32 @@ def solve_fem_static(mesh, material, *, clamp, gravity=None, traction=None, poin
 
     Parameters
     ----------
-    mesh : TetMesh -- rest shape; points [m]
-    material : (E, nu, density) -- see :func:`elastic_constants`; E [Pa], density [kg/m^3]
-    clamp : region, Clamp or list of Clamp -- a region (callable on (k, 3) points -> (k,) bool,
-        :class:`~validation.boundary.Box`, or (2, 3) box corners) fixes all components of its nodes to
-        zero; use :class:`~validation.boundary.Clamp` for single components (symmetry planes) or
-        prescribed displacements
-    gravity : (3,) float, optional -- acceleration of gravity [m/s^2]; body force density * gravity
-    traction : Traction or list of Traction, optional -- surface loads [Pa]
-        (:class:`~validation.boundary.Traction`)
-    point_loads : (n, 3) float or {node: (3,) float}, optional -- forces at mesh nodes [N]
-        (a point force on a continuum has no finite limit under refinement: use tractions for
+    mesh : TetMesh
+        rest shape; points [m]
+    material : (E, nu, density)
+        see :func:`elastic_constants`; E [Pa], density [kg/m^3]
+    clamp : region, Clamp or list of Clamp
+        a region (callable on (k, 3) points -> (k,) bool, :class:`~validation.boundary.Box`, or (2, 3) box corners)
+        fixes all components of its nodes to zero; use :class:`~validation.boundary.Clamp` for single components
+        (symmetry planes) or prescribed displacements
+    gravity : (3,) float, optional
+        acceleration of gravity [m/s^2]; body force density * gravity
+    traction : Traction or list of Traction, optional
+        surface loads [Pa] (:class:`~validation.boundary.Traction`)
+    point_loads : (n, 3) float or {node: (3,) float}, optional
+        forces at mesh nodes [N] (a point force on a continuum has no finite limit under refinement: use tractions for
         references that must converge)
-    body_force : callable (k, 3) float -> (k, 3) float, optional -- extra force per volume [N/m^3]
-    element : {"P2", "P1", "TH"} -- displacement P2 or P1 tets, or Taylor-Hood P2-P1 (P2 displacement,
-        continuous P1 pressure: free of volumetric locking as nu -> 1/2; needs nu > 0)
-    solver : {"auto", "direct", "amg"} -- ``"auto"`` is sparse LU up to
-        :data:`~validation.fem_solvers.DIRECT_DOF_LIMIT` free dofs, else CG preconditioned by
-        smoothed-aggregation AMG with the six rigid-body modes as near-null space (for P2 inside a
-        P2 -> P1 two-level cycle). TH is indefinite: always sparse LU, and ``"amg"`` is refused.
-    tolerance : float -- relative residual at which CG stops
+    body_force : callable (k, 3) float -> (k, 3) float, optional
+        extra force per volume [N/m^3]
+    element : {"P2", "P1", "TH"}
+        displacement P2 or P1 tets, or Taylor-Hood P2-P1 (P2 displacement, continuous P1 pressure: free of volumetric
+        locking as nu -> 1/2; needs nu > 0)
+    solver : {"auto", "direct", "amg"}
+        ``"auto"`` is sparse LU up to :data:`~validation.fem_solvers.DIRECT_DOF_LIMIT` free dofs, else CG preconditioned
+        by smoothed-aggregation AMG with the six rigid-body modes as near-null space (for P2 inside a P2 -> P1 two-level
+        cycle). TH is indefinite: always sparse LU, and ``"amg"`` is refused.
+    tolerance : float
+        relative residual at which CG stops
 
     Returns
     -------
@@ -268,11 +279,16 @@ class ModalSolution:
 
     Attributes
     ----------
-    frequencies : (k,) float -- eigenfrequencies, ascending [Hz]
-    shapes : (k, n, 3) float -- each mode at the mesh nodes, mass-normalised (phi^T M phi = 1) [kg^-1/2]
-    element : str -- ``"P1"``, ``"P2"`` or ``"TH"``
-    mass : str -- ``"consistent"`` or ``"lumped"``
-    info : ReferenceInfo -- ``residual`` is the largest ||K phi - lambda M phi|| / ||K phi||
+    frequencies : (k,) float
+        eigenfrequencies, ascending [Hz]
+    shapes : (k, n, 3) float
+        each mode at the mesh nodes, mass-normalised (phi^T M phi = 1) [kg^-1/2]
+    element : str
+        ``"P1"``, ``"P2"`` or ``"TH"``
+    mass : str
+        ``"consistent"`` or ``"lumped"``
+    info : ReferenceInfo
+        ``residual`` is the largest ||K phi - lambda M phi|| / ||K phi||
     """
 
     frequencies: np.ndarray
@@ -288,17 +304,22 @@ def solve_fem_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2
 
     Parameters
     ----------
-    mesh : TetMesh -- rest shape; points [m]
-    material : (E, nu, density) -- see :func:`elastic_constants`
-    clamp : region, Clamp or list of Clamp -- as for :func:`solve_fem_static`; prescribed
-        displacements are ignored (vibration about the clamped rest shape)
-    count : int -- number of modes, lowest first
-    element : {"P2", "P1", "TH"} -- for TH the pressure is condensed out: the stiffness is the Schur
-        complement ``A + lambda B^T C^-1 B`` (SPD, never formed), applied through the sparse LU of the
-        mixed matrix in the shift-invert step and through a LU of the pressure mass C elsewhere
-    mass : {"consistent", "lumped"} -- lumped is HRZ: the diagonal of the consistent mass scaled
-        to keep the total mass (row sums would give P2 vertices negative masses). On affine tets
-        every element's diagonal has the same proportions, so one global scale is exact HRZ.
+    mesh : TetMesh
+        rest shape; points [m]
+    material : (E, nu, density)
+        see :func:`elastic_constants`
+    clamp : region, Clamp or list of Clamp
+        as for :func:`solve_fem_static`; prescribed displacements are ignored (vibration about the clamped rest shape)
+    count : int
+        number of modes, lowest first
+    element : {"P2", "P1", "TH"}
+        for TH the pressure is condensed out: the stiffness is the Schur complement ``A + lambda B^T C^-1 B`` (SPD,
+        never formed), applied through the sparse LU of the mixed matrix in the shift-invert step and through a LU of
+        the pressure mass C elsewhere
+    mass : {"consistent", "lumped"}
+        lumped is HRZ: the diagonal of the consistent mass scaled to keep the total mass (row sums would give P2
+        vertices negative masses). On affine tets every element's diagonal has the same proportions, so one global scale
+        is exact HRZ.
 
     Returns
     -------
@@ -385,16 +406,19 @@ def error_norms(mesh, solution: StaticSolution, displacement: Callable, gradient
 
     Parameters
     ----------
-    mesh : TetMesh -- the mesh ``solution`` was computed on
+    mesh : TetMesh
+        the mesh ``solution`` was computed on
     solution : StaticSolution
-    displacement : callable (k, 3) float -> (k, 3) float -- exact u [m]
-    gradient : callable (k, 3) float -> (k, 3, 3) float -- exact du_a/dx_b [-]
+    displacement : callable (k, 3) float -> (k, 3) float
+        exact u [m]
+    gradient : callable (k, 3) float -> (k, 3, 3) float
+        exact du_a/dx_b [-]
 
     Returns
     -------
-    (l2, h1) : float -- sqrt(int |u_h - u|^2) [m^2.5] and sqrt(int |grad(u_h - u)|^2) [m^1.5], the
-        second equivalent to the energy norm. Optimal rates in the mesh size h: P1 h^2 and h,
-        P2 and TH h^3 and h^2.
+    (l2, h1) : float
+        sqrt(int |u_h - u|^2) [m^2.5] and sqrt(int |grad(u_h - u)|^2) [m^1.5], the second equivalent to the energy norm.
+        Optimal rates in the mesh size h: P1 h^2 and h, P2 and TH h^3 and h^2.
     """
     space = skfem_space(mesh, solution.element)
     basis = space.with_intorder(2 * space.order + 2)

@@ -174,9 +174,12 @@ def mixed_matrices(space: Space, pressure: Basis, mu: float) -> tuple[sp.csr_mat
 
     Returns
     -------
-    A : (N, N) CSR -- ``2 mu (eps u, eps v)`` [N/m]
-    B : (n, N) CSR -- ``(div u, q)`` [m^2]
-    C : (n, n) CSR -- ``(p, q)``, the P1 mass matrix [m^3]
+    A : (N, N) CSR
+        ``2 mu (eps u, eps v)`` [N/m]
+    B : (n, N) CSR
+        ``(div u, q)`` [m^2]
+    C : (n, n) CSR
+        ``(p, q)``, the P1 mass matrix [m^3]
     """
     # eps(P2) and div(P2) are P1 on affine tets: every integrand is quadratic, exact at order 2.
     A = asm(BilinearForm(lambda u, v, w: 2 * mu * ddot(sym_grad(u), sym_grad(v))), space.basis)

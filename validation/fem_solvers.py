@@ -83,6 +83,8 @@ _REFINED_ENOUGH = 1e-14
 class ReferenceInfo(SolveInfo):
     """How a reference was computed: :class:`volspring.solvers.SolveInfo` of its solve, plus the FEM's sizes.
 
+    The other attributes are those of :class:`~volspring.solvers.SolveInfo`.
+
     Attributes
     ----------
     method : str
@@ -96,8 +98,6 @@ class ReferenceInfo(SolveInfo):
         All dofs and those not clamped.
     assemble_seconds : float
         Wall time of the assembly [s]; ``setup_seconds`` + ``solve_seconds`` is that of the solve.
-
-    The other attributes are those of :class:`~volspring.solvers.SolveInfo`.
     """
 
     dof_count: int = 0

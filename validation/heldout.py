@@ -124,7 +124,8 @@ def generate_mesh(name: str) -> TetMesh:
 
     Parameters
     ----------
-    name : {"torus", "capsule", "l_bracket"} -- the bunny was not made here and has no recipe
+    name : {"torus", "capsule", "l_bracket"}
+        the bunny was not made here and has no recipe
     """
     from meshing import parse_shape, tetrahedralize
 
@@ -161,7 +162,8 @@ def torus_gravity(*, nu: float = 0.3) -> Case:
 
     Parameters
     ----------
-    nu : float -- Poisson ratio (E, density: :data:`HELDOUT`)
+    nu : float
+        Poisson ratio (E, density: :data:`HELDOUT`)
     """
     mesh = heldout_mesh("torus")
     material = _material("torus", nu)
@@ -178,10 +180,11 @@ def capsule_gravity(*, nu: float = 0.3, hanging: bool = False) -> Case:
 
     Parameters
     ----------
-    nu : float -- Poisson ratio (E, density: :data:`HELDOUT`)
-    hanging : bool -- False (default): gravity along -x, across the axis, a cantilever that bends;
-        True: gravity along -z, the capsule hangs from its cap and stretches (P1 is within 1-9% of P2
-        there, so it is not a case where P1 is visibly wrong)
+    nu : float
+        Poisson ratio (E, density: :data:`HELDOUT`)
+    hanging : bool
+        False (default): gravity along -x, across the axis, a cantilever that bends; True: gravity along -z, the capsule
+        hangs from its cap and stretches (P1 is within 1-9% of P2 there, so it is not a case where P1 is visibly wrong)
     """
     mesh = heldout_mesh("capsule")
     material = _material("capsule", nu)
@@ -203,7 +206,8 @@ def l_bracket_gravity(*, nu: float = 0.3) -> Case:
 
     Parameters
     ----------
-    nu : float -- Poisson ratio (E, density: :data:`HELDOUT`)
+    nu : float
+        Poisson ratio (E, density: :data:`HELDOUT`)
     """
     mesh = heldout_mesh("l_bracket")
     material = _material("l_bracket", nu)
@@ -220,7 +224,8 @@ def bunny_gravity(*, nu: float = 0.3) -> Case:
 
     Parameters
     ----------
-    nu : float -- Poisson ratio (E, density: :data:`HELDOUT`)
+    nu : float
+        Poisson ratio (E, density: :data:`HELDOUT`)
     """
     mesh = heldout_mesh("bunny")
     material = _material("bunny", nu)

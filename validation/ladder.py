@@ -106,15 +106,20 @@ def rung_constants(models=VALIDATED_MODELS, nus=LADDER_NUS, *, cells: int = 4, s
 
     Parameters
     ----------
-    models : sequence of str -- rungs
-    nus : sequence of float -- Poisson ratios asked (E: :data:`validation.cases.CUBE`)
-    cells : int -- cells along each edge of the cube
-    strain : float -- axial strain of the test [-]
+    models : sequence of str
+        rungs
+    nus : sequence of float
+        Poisson ratios asked (E: :data:`validation.cases.CUBE`)
+    cells : int
+        cells along each edge of the cube
+    strain : float
+        axial strain of the test [-]
 
     Returns
     -------
-    dict -- ``{rung: {"<nu>": {"E_pa", "E_ratio", "nu_asked", "nu_effective", "volume_strain_per_axial_strain"}
-    or {"refused": message}}}``, nu written with ``:g``
+    dict
+        ``{rung: {"<nu>": {"E_pa", "E_ratio", "nu_asked", "nu_effective", "volume_strain_per_axial_strain"} or
+        {"refused": message}}}``, nu written with ``:g``
     """
     mesh = uniaxial_compression(cells=cells).mesh
     table = {rung: {} for rung in models}
@@ -142,18 +147,23 @@ def step_costs(case, models=VALIDATED_MODELS, *, dt: float = FRAME_STEP_S, steps
     Parameters
     ----------
     case : Case
-    models : sequence of str -- rungs
-    dt : float -- step [s]
-    steps : int -- timed steps per rung, taken alternately across the rungs
-    warmup : int -- untimed steps before them
+    models : sequence of str
+        rungs
+    dt : float
+        step [s]
+    steps : int
+        timed steps per rung, taken alternately across the rungs
+    warmup : int
+        untimed steps before them
 
     Returns
     -------
-    dict -- ``{rung: {"step_seconds", "step_cost_vs_springs", "cg_iterations", "block_count", "nonzero_count",
-    "unknown_count", "assembled_block_count"} or {"refused": message}}`` for every rung of ``models``:
-    ``block_count`` counts the 3x3 blocks of the implicit system matrix with every element set assembled
-    (:class:`volspring.assembly.BlockPattern`), ``assembled_block_count`` those the integrator assembles
-    in a step (fewer when it applies a set as a product, matrix-free, and assembles a stand-in for it)
+    dict
+        ``{rung: {"step_seconds", "step_cost_vs_springs", "cg_iterations", "block_count", "nonzero_count",
+        "unknown_count", "assembled_block_count"} or {"refused": message}}`` for every rung of ``models``:
+        ``block_count`` counts the 3x3 blocks of the implicit system matrix with every element set assembled
+        (:class:`volspring.assembly.BlockPattern`), ``assembled_block_count`` those the integrator assembles in a step
+        (fewer when it applies a set as a product, matrix-free, and assembles a stand-in for it)
     """
     from volspring.assembly import BlockPattern
     from volspring.integrators.implicit import ImplicitEuler
@@ -198,16 +208,19 @@ def case_rows(comparison, costs: dict) -> list:
 
     Parameters
     ----------
-    comparison : Comparison -- of a static or modal case, its ``results["models"]`` filled
-    costs : dict -- :func:`step_costs` of the same case
+    comparison : Comparison
+        of a static or modal case, its ``results["models"]`` filled
+    costs : dict
+        :func:`step_costs` of the same case
 
     Returns
     -------
-    list of dict -- ``case``, ``title``, ``kind``, ``rung``, ``nu``, ``node_count`` and either ``refused``
-    or the accuracy (static: ``tip_deflection_m``, ``reference_tip_deflection_m``, ``tip_deflection_error``,
-    ``rms_displacement_error``, ``volume_change_m3``, ``reference_volume_change_m3``,
-    ``volume_change_error_vs_fem``; modal: ``frequencies_hz``, ``reference_frequencies_hz``,
-    ``frequency_errors``, the first :data:`FREQUENCY_COUNT`) and the cost (:func:`step_costs`)
+    list of dict
+        ``case``, ``title``, ``kind``, ``rung``, ``nu``, ``node_count`` and either ``refused`` or the accuracy (static:
+        ``tip_deflection_m``, ``reference_tip_deflection_m``, ``tip_deflection_error``, ``rms_displacement_error``,
+        ``volume_change_m3``, ``reference_volume_change_m3``, ``volume_change_error_vs_fem``; modal: ``frequencies_hz``,
+        ``reference_frequencies_hz``, ``frequency_errors``, the first :data:`FREQUENCY_COUNT`) and the cost
+        (:func:`step_costs`)
     """
     results = comparison.results
     element = next(iter(results["fem"]))  # the comparison's reference: its first element
@@ -244,22 +257,28 @@ def run_ladder(cases=(), *, comparisons=(), models=VALIDATED_MODELS, folder=None
 
     Parameters
     ----------
-    cases : sequence of Case -- compared here (:func:`~validation.compare.compare_static` or
-        :func:`~validation.compare.compare_modes`, no spring rules, no P1): static cases against
-        :data:`STATIC_REFERENCE` (Taylor-Hood, which does not lock; P2 beside it), modes against P2
-    comparisons : sequence of Comparison -- made already with ``models=`` (the report's own cases): their
-        answers are used, not solved again
-    models : sequence of str -- rungs
-    folder : path, optional -- FEM cache folder
-    cells : int -- cells per edge of the cube of the effective constants
+    cases : sequence of Case
+        compared here (:func:`~validation.compare.compare_static` or :func:`~validation.compare.compare_modes`, no
+        spring rules, no P1): static cases against :data:`STATIC_REFERENCE` (Taylor-Hood, which does not lock; P2 beside
+        it), modes against P2
+    comparisons : sequence of Comparison
+        made already with ``models=`` (the report's own cases): their answers are used, not solved again
+    models : sequence of str
+        rungs
+    folder : path, optional
+        FEM cache folder
+    cells : int
+        cells per edge of the cube of the effective constants
     dt, steps : as for :func:`step_costs`
-    progress : callable, optional -- ``progress(message)``
+    progress : callable, optional
+        ``progress(message)``
 
     Returns
     -------
-    dict -- ``models``, ``rule`` (of the springs rung), ``dt_s``, ``steps``, ``warmup_steps``,
-    ``constants_cells``, ``constants`` (:func:`rung_constants`, at :data:`LADDER_NUS` and every case's nu) and
-    ``rows`` (:func:`case_rows`, each with ``E_effective_ratio`` and ``nu_effective`` of its rung at its nu)
+    dict
+        ``models``, ``rule`` (of the springs rung), ``dt_s``, ``steps``, ``warmup_steps``, ``constants_cells``,
+        ``constants`` (:func:`rung_constants`, at :data:`LADDER_NUS` and every case's nu) and ``rows``
+        (:func:`case_rows`, each with ``E_effective_ratio`` and ``nu_effective`` of its rung at its nu)
 
     Examples
     --------

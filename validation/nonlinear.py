@@ -118,8 +118,10 @@ def neo_hookean_uniaxial(strain: float, E: float, nu: float) -> tuple[float, flo
 
     Returns
     -------
-    s : float -- the lateral stretch [-]
-    P11 : float -- the axial first Piola-Kirchhoff stress [Pa] (force per rest area)
+    s : float
+        the lateral stretch [-]
+    P11 : float
+        the axial first Piola-Kirchhoff stress [Pa] (force per rest area)
     """
     mu, lam = lame_constants(E, nu)
     a = 1.0 + strain
@@ -140,18 +142,29 @@ class NonlinearSolution:
 
     Attributes
     ----------
-    displacement : (n, 3) float -- displacement of each mesh node [m] (P2: its vertex dofs)
-    reaction_force : (3,) float -- total force the clamps exert on the body [N] (minus the total load;
-        zero for a body held only by self-balancing clamps: see :meth:`reaction_in`)
-    reactions : (N,) float -- the force each clamped dof exerts [N] (0 on free dofs)
-    dof_locations : (N, 3) float -- where each dof sits [m] (a node or, for P2, an edge midpoint)
-    dof_components : (N,) int -- the component (0, 1, 2) of each dof
-    energy : float -- stored energy minus the work of the (dead) loads at the solution [J]
-    dofs : (N,) float -- the whole finite-element vector, in scikit-fem's dof order [m]
-    element : str -- ``"P1"`` or ``"P2"``
-    newton_iterations : tuple of int -- Newton iterations of each load step taken (the predictor counts as one)
-    residual : float -- final ||r_free|| / max(||f_ext||, ||f_int||) [-]
-    seconds : float -- wall time of the whole solve [s]
+    displacement : (n, 3) float
+        displacement of each mesh node [m] (P2: its vertex dofs)
+    reaction_force : (3,) float
+        total force the clamps exert on the body [N] (minus the total load; zero for a body held only by self-balancing
+        clamps: see :meth:`reaction_in`)
+    reactions : (N,) float
+        the force each clamped dof exerts [N] (0 on free dofs)
+    dof_locations : (N, 3) float
+        where each dof sits [m] (a node or, for P2, an edge midpoint)
+    dof_components : (N,) int
+        the component (0, 1, 2) of each dof
+    energy : float
+        stored energy minus the work of the (dead) loads at the solution [J]
+    dofs : (N,) float
+        the whole finite-element vector, in scikit-fem's dof order [m]
+    element : str
+        ``"P1"`` or ``"P2"``
+    newton_iterations : tuple of int
+        Newton iterations of each load step taken (the predictor counts as one)
+    residual : float
+        final ||r_free|| / max(||f_ext||, ||f_int||) [-]
+    seconds : float
+        wall time of the whole solve [s]
     """
 
     displacement: np.ndarray
@@ -180,15 +193,20 @@ def solve_neo_hookean_static(mesh, material, *, clamp, gravity=None, traction=No
 
     Parameters
     ----------
-    mesh : TetMesh -- rest shape; points [m]
-    material : (E, nu, density) -- see :func:`validation.fem.elastic_constants`
+    mesh : TetMesh
+        rest shape; points [m]
+    material : (E, nu, density)
+        see :func:`validation.fem.elastic_constants`
     clamp, gravity, traction, point_loads : as for :func:`validation.fem.solve_fem_static`; loads
         are dead loads, and prescribed displacements and loads grow together over the load steps
     element : {"P2", "P1"}
-    load_steps : int -- load increments, each solved by Newton from the last (an increment whose
-        predictor would invert the material, or whose Newton fails, is halved, down to 1/256 of it)
-    rtol : float -- Newton stops at ||r_free|| <= rtol max(||f_ext||, ||f_int||)
-    max_iterations : int -- Newton iterations allowed per load step
+    load_steps : int
+        load increments, each solved by Newton from the last (an increment whose predictor would invert the material, or
+        whose Newton fails, is halved, down to 1/256 of it)
+    rtol : float
+        Newton stops at ||r_free|| <= rtol max(||f_ext||, ||f_int||)
+    max_iterations : int
+        Newton iterations allowed per load step
 
     Returns
     -------

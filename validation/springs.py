@@ -220,10 +220,12 @@ def spring_static(case: Case, model: Model, *, method: str = "auto") -> SpringSt
     Parameters
     ----------
     case : Case
-    model : Model -- of ``case.mesh`` (any element sets)
-    method : {"auto", "newton"} -- Newton on the nonlinear model (:func:`volspring.statics.solve_static`)
-        with sparse LU up to ``DIRECT_STATIC_NODES`` nodes and AMG-CG above; the linearised
-        solve of 0.1 is gone, as volspring's solve now holds sliding and prescribed supports
+    model : Model
+        of ``case.mesh`` (any element sets)
+    method : {"auto", "newton"}
+        Newton on the nonlinear model (:func:`volspring.statics.solve_static`) with sparse LU up to
+        ``DIRECT_STATIC_NODES`` nodes and AMG-CG above; the linearised solve of 0.1 is gone, as volspring's solve now
+        holds sliding and prescribed supports
 
     Returns
     -------
@@ -249,13 +251,16 @@ def spring_frequencies(model: Model, held: np.ndarray, *, count: int = 4) -> tup
     Parameters
     ----------
     model : Model
-    held : (n,) bool -- pinned nodes
+    held : (n,) bool
+        pinned nodes
     count : int
 
     Returns
     -------
-    frequencies : (count,) float -- ascending [Hz]
-    shapes : (count, n, 3) float -- mass-normalised mode shapes, zero on held nodes
+    frequencies : (count,) float
+        ascending [Hz]
+    shapes : (count, n, 3) float
+        mass-normalised mode shapes, zero on held nodes
     """
     modes = solve_modes(Scene(model, pins=Pins(np.asarray(held, bool))), count=count)
     return modes.frequencies, modes.shapes
@@ -277,14 +282,18 @@ def effective_constants(mesh: TetMesh, model: Model, *, strain: float = 1e-3) ->
 
     Parameters
     ----------
-    mesh : TetMesh -- a box (its faces lie on its bounding box)
-    model : Model -- of ``mesh``
-    strain : float -- axial strain [-]
+    mesh : TetMesh
+        a box (its faces lie on its bounding box)
+    model : Model
+        of ``mesh``
+    strain : float
+        axial strain [-]
 
     Returns
     -------
-    dict -- ``E_pa`` (reaction / (area strain)), ``nu`` (mean of the two lateral ratios), ``nu_y``,
-    ``nu_z``, ``volume_strain_per_axial_strain`` (dV / (V strain); exact: 1 - 2 nu)
+    dict
+        ``E_pa`` (reaction / (area strain)), ``nu`` (mean of the two lateral ratios), ``nu_y``, ``nu_z``,
+        ``volume_strain_per_axial_strain`` (dV / (V strain); exact: 1 - 2 nu)
     """
     low, high = mesh.bounds
     size = high - low

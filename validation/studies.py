@@ -85,17 +85,22 @@ def refinement_study(levels=(1, 2, 4), *, reference_level: int = 8, rules=RULES,
 
     Parameters
     ----------
-    levels : sequence of int -- cells across the beam's height (1 is 10 x 1 x 1 cells, 44 nodes)
-    reference_level : int -- the P2 solution at this level is the converged reference
+    levels : sequence of int
+        cells across the beam's height (1 is 10 x 1 x 1 cells, 44 nodes)
+    reference_level : int
+        the P2 solution at this level is the converged reference
     rules : sequence of str
-    folder : path, optional -- FEM cache folder
-    progress : callable, optional -- ``progress(message)``
+    folder : path, optional
+        FEM cache folder
+    progress : callable, optional
+        ``progress(message)``
 
     Returns
     -------
-    dict -- ``node_counts``, ``tip_deflection_m`` and ``tip_deflection_error`` per model
-    (``fem_P1``, ``fem_P2``, ``springs_<rule>``), ``rates_per_node_count`` and ``rates_per_mesh_size``,
-    ``reference_tip_deflection_m``, ``beam_theory_tip_deflection_m``
+    dict
+        ``node_counts``, ``tip_deflection_m`` and ``tip_deflection_error`` per model (``fem_P1``, ``fem_P2``,
+        ``springs_<rule>``), ``rates_per_node_count`` and ``rates_per_mesh_size``, ``reference_tip_deflection_m``,
+        ``beam_theory_tip_deflection_m``
     """
     note = progress or (lambda message: None)
     levels = sorted(int(level) for level in levels)
@@ -206,26 +211,35 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps=None, pe
 
     Parameters
     ----------
-    per_height : int -- cells across the cantilever (1: 44 nodes)
-    rule : str -- stiffness rule of the spring model
-    steps : dict, optional -- integrator name -> multiples of its critical step
-        (default :data:`INTEGRATOR_STEPS`)
-    periods : float -- simulated time of each run, in periods of the loaded mode (of the spring
-        model's own frequency)
-    duration : float, optional -- simulated time of each run [s]; overrides ``periods``
-    residual_amplitude : float -- what is left of the free motion at the end of the run, relative
-        to its start: sets the drag when ``drag_rate`` is not given, c = 2 ln(1 / residual) / duration
-        (5e-5: c T / 2 = 9.9, a damping ratio of 9.9 / (2 pi periods), 0.32 over 5 periods)
-    drag_rate : float, optional -- mass-proportional damping c [1/s]; the motion decays as exp(-c t / 2)
-    frame_dt : float -- sampling of the tip trajectory [s] (at least one step)
-    folder : path, optional -- FEM cache folder
-    progress : callable, optional -- ``progress(message)``
+    per_height : int
+        cells across the cantilever (1: 44 nodes)
+    rule : str
+        stiffness rule of the spring model
+    steps : dict, optional
+        integrator name -> multiples of its critical step (default :data:`INTEGRATOR_STEPS`)
+    periods : float
+        simulated time of each run, in periods of the loaded mode (of the spring model's own frequency)
+    duration : float, optional
+        simulated time of each run [s]; overrides ``periods``
+    residual_amplitude : float
+        what is left of the free motion at the end of the run, relative to its start: sets the drag when ``drag_rate``
+        is not given, c = 2 ln(1 / residual) / duration (5e-5: c T / 2 = 9.9, a damping ratio of 9.9 / (2 pi periods),
+        0.32 over 5 periods)
+    drag_rate : float, optional
+        mass-proportional damping c [1/s]; the motion decays as exp(-c t / 2)
+    frame_dt : float
+        sampling of the tip trajectory [s] (at least one step)
+    folder : path, optional
+        FEM cache folder
+    progress : callable, optional
+        ``progress(message)``
 
     Returns
     -------
-    dict -- parameters, references and ``runs``: one record per (integrator, step), with
-    ``simulated_s`` (the time reached: less than the duration when the run diverged) and
-    ``wall_seconds_per_simulated_second`` (wall time over simulated time reached)
+    dict
+        parameters, references and ``runs``: one record per (integrator, step), with ``simulated_s`` (the time reached:
+        less than the duration when the run diverged) and ``wall_seconds_per_simulated_second`` (wall time over
+        simulated time reached)
     """
     if not periods > 0:
         raise ValueError(f"periods = {periods!r} is not > 0")
@@ -332,18 +346,24 @@ def cauchy_study(*, cells: int = 4, rules=RULES, nus=(0.0, 0.25, 0.3, 0.45, 0.49
 
     Parameters
     ----------
-    cells : int -- cells along each edge of the cube
+    cells : int
+        cells along each edge of the cube
     rules : sequence of str
-    nus : sequence of float -- the Poisson ratios asked of the material
-    E : float -- Young's modulus asked [Pa]
-    strain : float -- axial strain of the test [-]
-    patterns : sequence of str -- mesh patterns (:func:`meshing.structured_box`)
+    nus : sequence of float
+        the Poisson ratios asked of the material
+    E : float
+        Young's modulus asked [Pa]
+    strain : float
+        axial strain of the test [-]
+    patterns : sequence of str
+        mesh patterns (:func:`meshing.structured_box`)
 
     Returns
     -------
-    dict -- ``measurements``: one record per (pattern, rule, nu) with ``E_pa``, ``E_ratio``
-    (E_eff / E), ``nu_effective``, ``nu_asked``, ``volume_strain_per_axial_strain`` and its exact value
-    1 - 2 nu; ``summary`` per (pattern, rule): the spread of nu_effective over the asked nu
+    dict
+        ``measurements``: one record per (pattern, rule, nu) with ``E_pa``, ``E_ratio`` (E_eff / E), ``nu_effective``,
+        ``nu_asked``, ``volume_strain_per_axial_strain`` and its exact value 1 - 2 nu; ``summary`` per (pattern, rule):
+        the spread of nu_effective over the asked nu
     """
     measurements, summary = [], {}
     for pattern in patterns:

@@ -28,9 +28,12 @@ def deprecated_alias(module: str, name: str, renamed: dict):
 
     Parameters
     ----------
-    module : str -- the module asked (its ``__name__``)
-    name : str -- the attribute asked for
-    renamed : dict -- old name -> (new canonical path, object)
+    module : str
+        the module asked (its ``__name__``)
+    name : str
+        the attribute asked for
+    renamed : dict
+        old name -> (new canonical path, object)
     """
     if name not in renamed:
         raise AttributeError(f"module {module!r} has no attribute {name!r}")
@@ -44,10 +47,12 @@ def warn_deprecated(old: str, new_path: str, *, stacklevel: int = 3) -> None:
 
     Parameters
     ----------
-    old : str -- the old name, with its module (``"volspring.collision.assemble_bodies"``)
-    new_path : str -- what to use instead
-    stacklevel : int -- as for :func:`warnings.warn`; the default 3 points at the caller of the
-        function that calls this one
+    old : str
+        the old name, with its module (``"volspring.collision.assemble_bodies"``)
+    new_path : str
+        what to use instead
+    stacklevel : int
+        as for :func:`warnings.warn`; the default 3 points at the caller of the function that calls this one
     """
     warnings.warn(f"{old} is deprecated and will be removed in volspring {REMOVED_IN}; use {new_path}",
                   DeprecationWarning, stacklevel=stacklevel)

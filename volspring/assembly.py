@@ -77,8 +77,10 @@ class ModelLinearization:
 
     Attributes
     ----------
-    forces : (n, 3) float -- internal forces on the model's nodes [N]
-    parts : tuple of Linearization -- one per element set, each in its set's evaluation numbering
+    forces : (n, 3) float
+        internal forces on the model's nodes [N]
+    parts : tuple of Linearization
+        one per element set, each in its set's evaluation numbering
     """
 
     forces: np.ndarray
@@ -98,20 +100,28 @@ class BlockPattern:
     Parameters
     ----------
     model : Model
-    free : (n,) bool, optional -- nodes that are unknowns; all nodes when omitted
-    ordering : {"rcm", "natural"} -- numbering of the free nodes: reverse Cuthill-McKee on the
-        graph of the stencils (for cache locality, see :meth:`_reorder`) or increasing node index
-    matrix_free : bool -- element sets that offer it (:attr:`volspring.elements.ElementSet.matrix_free`)
-        are applied as products (:meth:`operator`) instead of assembled: the pattern holds their
-        sparser preconditioner stand-in, which :meth:`matrix` adds with ``preconditioner=True``
+    free : (n,) bool, optional
+        nodes that are unknowns; all nodes when omitted
+    ordering : {"rcm", "natural"}
+        numbering of the free nodes: reverse Cuthill-McKee on the graph of the stencils (for cache locality, see
+        :meth:`_reorder`) or increasing node index
+    matrix_free : bool
+        element sets that offer it (:attr:`volspring.elements.ElementSet.matrix_free`) are applied as products
+        (:meth:`operator`) instead of assembled: the pattern holds their sparser preconditioner stand-in, which
+        :meth:`matrix` adds with ``preconditioner=True``
 
     Attributes
     ----------
-    free_nodes : (f,) int -- model node index of each free node, in unknown order
-    node_order : (n,) int -- model node of each local node: the free nodes, then the fixed ones
-    node_rank : (n,) int -- local index of each model node (inverse of ``node_order``)
-    node_index : (n,) int -- free index of each model node, -1 for fixed nodes
-    size : int -- number of unknowns, 3 f
+    free_nodes : (f,) int
+        model node index of each free node, in unknown order
+    node_order : (n,) int
+        model node of each local node: the free nodes, then the fixed ones
+    node_rank : (n,) int
+        local index of each model node (inverse of ``node_order``)
+    node_index : (n,) int
+        free index of each model node, -1 for fixed nodes
+    size : int
+        number of unknowns, 3 f
 
     Examples
     --------
@@ -243,12 +253,17 @@ class BlockPattern:
 
         Parameters
         ----------
-        x : (n, 3) float -- positions [m]
-        v : (n, 3) float, optional -- velocities [m/s]; without them dampers exert no force
-        stiffness_scale : float -- c_K
-        damping_scale : float -- c_D
-        clamp_compression : bool -- positive semi-definite blocks where the Hessian is not
-            (see :meth:`volspring.elements.ElementSet.stiffness_blocks`)
+        x : (n, 3) float
+            positions [m]
+        v : (n, 3) float, optional
+            velocities [m/s]; without them dampers exert no force
+        stiffness_scale : float
+            c_K
+        damping_scale : float
+            c_D
+        clamp_compression : bool
+            positive semi-definite blocks where the Hessian is not (see
+            :meth:`volspring.elements.ElementSet.stiffness_blocks`)
 
         Returns
         -------
@@ -292,11 +307,14 @@ class BlockPattern:
         Parameters
         ----------
         linearization : ModelLinearization, or the blocks array of a model with one element set
-        diagonal : (f,) or (f, 3) or (f, 3, 3) float, optional -- added to the diagonal block of
-            each free node: a scalar times I (e.g. the masses), a diagonal, or a full block
-        out : (nnzb, 3, 3) float, optional -- written in place
-        preconditioner : bool -- add the stand-in blocks of the sets applied as products (the
-            matrix to build a preconditioner from); without it they add nothing (see :meth:`operator`)
+        diagonal : (f,) or (f, 3) or (f, 3, 3) float, optional
+            added to the diagonal block of each free node: a scalar times I (e.g. the masses), a diagonal, or a full
+            block
+        out : (nnzb, 3, 3) float, optional
+            written in place
+        preconditioner : bool
+            add the stand-in blocks of the sets applied as products (the matrix to build a preconditioner from); without
+            it they add nothing (see :meth:`operator`)
         """
         blocks = [linearization] if isinstance(linearization, np.ndarray) else \
             [lin.blocks if not part.operator else lin.preconditioner_blocks() if preconditioner else None
@@ -368,8 +386,11 @@ class BlockPattern:
         Parameters
         ----------
         linearization : ModelLinearization, or the blocks of a model with one element set
-        prescribed : (n, 3) float -- values on the fixed nodes (rows of free nodes are ignored)
+        prescribed : (n, 3) float
+            values on the fixed nodes (rows of free nodes are ignored)
 
+        Notes
+        -----
         Only the free nodes' rows of the result are meaningful.
         """
         blocks = [linearization] if isinstance(linearization, np.ndarray) else \
@@ -403,9 +424,12 @@ def stiffness_matrix(model, x=None, *, free=None, clamp_compression=True) -> sp.
     Parameters
     ----------
     model : Model
-    x : (n, 3) float, optional -- configuration [m]; default the rest shape
-    free : (n,) bool, optional -- default all nodes
-    clamp_compression : bool -- clamp the transverse term under compression (see ``volspring.springs``)
+    x : (n, 3) float, optional
+        configuration [m]; default the rest shape
+    free : (n,) bool, optional
+        default all nodes
+    clamp_compression : bool
+        clamp the transverse term under compression (see ``volspring.springs``)
 
     Examples
     --------
@@ -438,14 +462,18 @@ def eliminate_held(pattern, matrix, held, *, extra=None):
     Parameters
     ----------
     pattern : BlockPattern
-    matrix : (3f, 3f) BSR -- on ``pattern``; its data is changed in place
-    held : (3f,) bool -- the held unknowns (:func:`held_unknowns`)
-    extra : (3f, 3f) sparse, optional -- a further term of the system, masked the same way
+    matrix : (3f, 3f) BSR
+        on ``pattern``; its data is changed in place
+    held : (3f,) bool
+        the held unknowns (:func:`held_unknowns`)
+    extra : (3f, 3f) sparse, optional
+        a further term of the system, masked the same way
 
     Returns
     -------
     matrix : the same BSR matrix, eliminated
-    diagonal : (3f,) float -- the diagonal of A before elimination
+    diagonal : (3f,) float
+        the diagonal of A before elimination
     extra : the masked extra term (or None)
     """
     diagonal = matrix.diagonal()

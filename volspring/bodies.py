@@ -119,18 +119,24 @@ def checked_body_fields(node_body, materials, body_names, material, node_count):
 
     Parameters
     ----------
-    node_body : (n,) int or None -- body id of every node; None: all 0
-    materials : sequence of Material or None, or None -- one per body; None: ``material`` for every body
-    body_names : sequence of str or None -- one per body; None: all ""
-    material : Material or None -- the model's single material
-    node_count : int -- n
+    node_body : (n,) int or None
+        body id of every node; None: all 0
+    materials : sequence of Material or None, or None
+        one per body; None: ``material`` for every body
+    body_names : sequence of str or None
+        one per body; None: all ""
+    material : Material or None
+        the model's single material
+    node_count : int
+        n
 
     Returns
     -------
     node_body : (n,) int64, read-only
     materials : tuple, one per body
     body_names : tuple of str, one per body
-    material : Material or None -- the materials' common value, None when they differ
+    material : Material or None
+        the materials' common value, None when they differ
 
     Raises
     ------
@@ -232,14 +238,16 @@ def assemble(model_class, bodies):
 
     Parameters
     ----------
-    model_class : type -- :class:`~volspring.Model` (or a subclass)
+    model_class : type
+        :class:`~volspring.Model` (or a subclass)
     bodies : sequence of Body
 
     Returns
     -------
-    Model -- node numbering in the module docstring; ``rule`` and ``rung`` the bodies' common rule and
-    rung, or "mixed"; one spring set for all springs, and each body's continuum sets placed (kept per body:
-    each has its own Rayleigh damping time)
+    Model
+        node numbering in the module docstring; ``rule`` and ``rung`` the bodies' common rule and rung, or "mixed"; one
+        spring set for all springs, and each body's continuum sets placed (kept per body: each has its own Rayleigh
+        damping time)
     """
     bodies = _checked_bodies(bodies)
     parts = []
@@ -302,13 +310,15 @@ def initial_velocities(bodies, model) -> np.ndarray:
 
     Parameters
     ----------
-    bodies : sequence of Body -- those the model was built from (:meth:`Model.from_bodies
-        <volspring.Model.from_bodies>`), in the same order
-    model : Model -- gives the nodes of each body (``node_body``), their masses and rest positions
+    bodies : sequence of Body
+        those the model was built from (:meth:`Model.from_bodies <volspring.Model.from_bodies>`), in the same order
+    model : Model
+        gives the nodes of each body (``node_body``), their masses and rest positions
 
     Returns
     -------
-    (n, 3) float -- for ``scene.initial_state(v=...)`` [m/s]
+    (n, 3) float
+        for ``scene.initial_state(v=...)`` [m/s]
 
     Raises
     ------

@@ -83,13 +83,13 @@ def model_fingerprint(scene) -> dict:
 
     Returns
     -------
-    dict -- part name ("rest positions", "springs", "rest lengths", "stiffness", "damping",
-        "masses", "pinned nodes", and where a scene has them "held components", "node body", "body
-        materials", "rung" (a model off the springs rung) and one entry per element set besides the
-        springs, ``"elements[i] TYPE"``) -> 16 hex digits of the SHA-256 of its bytes (dtype and shape
-        included), so equal digests mean bit-identical data. An element set is digested by the
-        arrays a model file stores for it (:data:`volspring.model_io.ELEMENT_SET_TYPES`), a set of
-        another type by its stencil only (its own data are not known here).
+    dict
+        part name ("rest positions", "springs", "rest lengths", "stiffness", "damping", "masses", "pinned nodes", and
+        where a scene has them "held components", "node body", "body materials", "rung" (a model off the springs rung)
+        and one entry per element set besides the springs, ``"elements[i] TYPE"``) -> 16 hex digits of the SHA-256 of
+        its bytes (dtype and shape included), so equal digests mean bit-identical data. An element set is digested by
+        the arrays a model file stores for it (:data:`volspring.model_io.ELEMENT_SET_TYPES`), a set of another type by
+        its stencil only (its own data are not known here).
     """
     from volspring.model_io import ELEMENT_SET_TYPES
 
@@ -137,16 +137,19 @@ def save_checkpoint(path, state: State, *, scene=None, integrator=None, dt=None)
 
     Parameters
     ----------
-    path : path-like -- the file to write; parent folders are created
-    state : State -- x (n, 3) [m], v (n, 3) [m/s], t [s], step, and ``memory``: a dict of numpy
-        arrays, numpy scalars, Python floats, ints, bools, strings, None, or nested dicts of these
-    scene, integrator, dt : optional -- the run that wrote the state (all three or none): recorded
-        so that :func:`load_checkpoint` can refuse to resume it with another model, integrator
-        or step
+    path : path-like
+        the file to write; parent folders are created
+    state : State
+        x (n, 3) [m], v (n, 3) [m/s], t [s], step, and ``memory``: a dict of numpy arrays, numpy scalars, Python floats,
+        ints, bools, strings, None, or nested dicts of these
+    scene, integrator, dt : optional
+        the run that wrote the state (all three or none): recorded so that :func:`load_checkpoint` can refuse to resume
+        it with another model, integrator or step
 
     Returns
     -------
-    Path -- ``path``
+    Path
+        ``path``
 
     Raises
     ------
@@ -200,12 +203,14 @@ def load_checkpoint(path, *, scene=None, integrator=None, dt=None) -> State:
     Parameters
     ----------
     path : path-like
-    scene, integrator, dt : optional -- the run about to resume; each one given is compared with
-        what the checkpoint recorded (a checkpoint saved without a run record is not checked)
+    scene, integrator, dt : optional
+        the run about to resume; each one given is compared with what the checkpoint recorded (a checkpoint saved
+        without a run record is not checked)
 
     Returns
     -------
-    State -- with x, v, t (float), step (int) and memory as saved, arrays writeable
+    State
+        with x, v, t (float), step (int) and memory as saved, arrays writeable
 
     Raises
     ------

@@ -45,13 +45,17 @@ def constraint_colors(pairs, *, node_count=None, seed=0) -> np.ndarray:
 
     Parameters
     ----------
-    pairs : (s, 2) int -- node pairs
-    node_count : int, optional -- number of nodes (default: largest index + 1)
-    seed : int -- seed of the random priorities (the colouring is deterministic given it)
+    pairs : (s, 2) int
+        node pairs
+    node_count : int, optional
+        number of nodes (default: largest index + 1)
+    seed : int
+        seed of the random priorities (the colouring is deterministic given it)
 
     Returns
     -------
-    (s,) int -- colour of each pair, 0 .. colours - 1
+    (s,) int
+        colour of each pair, 0 .. colours - 1
 
     Examples
     --------
@@ -99,9 +103,13 @@ _TINY = 1e-300  # [m], guards the division by a zero length
 class RelaxationReport(NamedTuple):
     """What one relaxation did.
 
-    sweeps : int -- Gauss-Seidel sweeps over all colours
-    violation : float -- largest relative violation |l - target| / l0 met in the last sweep,
-        before that sweep corrected it (an upper estimate of what is left)
+    Attributes
+    ----------
+    sweeps : int
+        Gauss-Seidel sweeps over all colours
+    violation : float
+        largest relative violation |l - target| / l0 met in the last sweep, before that sweep corrected it (an upper
+        estimate of what is left)
     """
 
     sweeps: int
@@ -167,9 +175,12 @@ class _PairProjection:
 
         Parameters
         ----------
-        x : (n, 3) float -- positions [m], changed in place
-        free : (n,) bool, optional -- nodes that may move (default all); the others are infinitely heavy
-        iterations : int, optional -- the largest number of sweeps (default: ``self.iterations``)
+        x : (n, 3) float
+            positions [m], changed in place
+        free : (n,) bool, optional
+            nodes that may move (default all); the others are infinitely heavy
+        iterations : int, optional
+            the largest number of sweeps (default: ``self.iterations``)
 
         Returns
         -------
@@ -230,14 +241,20 @@ class DistanceConstraints(_PairProjection):
 
     Parameters
     ----------
-    masses : (n,) float -- node masses [kg] (``model.masses``)
-    pairs : (s, 2) int -- constrained node pairs
-    lengths : float or (s,) float -- target distances l_ij [m], > 0
-    iterations : int -- Gauss-Seidel sweeps per projection, >= 1 (keyword-only)
-    stiffness : float -- k in (0, 1], the fraction of the violation removed per update (PBD
-        stiffness: the effective stiffness depends on ``iterations``; 1 is a hard constraint)
-    tolerance : float -- stop sweeping once the largest relative violation met in a sweep is at
-        most this [-] (default 0: always ``iterations`` sweeps)
+    masses : (n,) float
+        node masses [kg] (``model.masses``)
+    pairs : (s, 2) int
+        constrained node pairs
+    lengths : float or (s,) float
+        target distances l_ij [m], > 0
+    iterations : int
+        Gauss-Seidel sweeps per projection, >= 1 (keyword-only)
+    stiffness : float
+        k in (0, 1], the fraction of the violation removed per update (PBD stiffness: the effective stiffness depends on
+        ``iterations``; 1 is a hard constraint)
+    tolerance : float
+        stop sweeping once the largest relative violation met in a sweep is at most this [-] (default 0: always
+        ``iterations`` sweeps)
 
     Examples
     --------
@@ -260,7 +277,8 @@ class DistanceConstraints(_PairProjection):
         Parameters
         ----------
         model : Model
-        springs : (k,) int or (s,) bool, optional -- which springs to constrain (default all)
+        springs : (k,) int or (s,) bool, optional
+            which springs to constrain (default all)
         iterations, stiffness, tolerance : as for the constructor
         """
         select = slice(None) if springs is None else np.asarray(springs)
@@ -283,12 +301,17 @@ class StrainLimit(_PairProjection):
     Parameters
     ----------
     model : Model
-    tau : float -- largest allowed stretch (l - l0) / l0 [-], > 0 (Provot used 0.1)
-    compression : float, optional -- largest allowed shortening (l0 - l) / l0 [-], in (0, 1)
-    iterations : int -- Gauss-Seidel sweeps per projection, >= 1 (keyword-only)
-    tolerance : float -- stop once no spring exceeds its bound by more than this [-] (relative)
-    springs : (k,) int or (s,) bool, optional -- which of the model's springs to limit (default all;
-        cloth limits its structural and shear springs, :func:`volspring.structures.cloth_strain_limit`)
+    tau : float
+        largest allowed stretch (l - l0) / l0 [-], > 0 (Provot used 0.1)
+    compression : float, optional
+        largest allowed shortening (l0 - l) / l0 [-], in (0, 1)
+    iterations : int
+        Gauss-Seidel sweeps per projection, >= 1 (keyword-only)
+    tolerance : float
+        stop once no spring exceeds its bound by more than this [-] (relative)
+    springs : (k,) int or (s,) bool, optional
+        which of the model's springs to limit (default all; cloth limits its structural and shear springs,
+        :func:`volspring.structures.cloth_strain_limit`)
 
     Examples
     --------

@@ -97,10 +97,12 @@ class TetInversion(NamedTuple):
 
     Parameters
     ----------
-    count : int -- tets whose signed volume is <= 0 (inverted or flat)
-    worst_volume_ratio : float -- smallest V / V_rest over all tets [-] (negative once one inverts;
-        NaN for a model without tets)
-    tet_count : int -- tets checked (0 for a model built from arrays)
+    count : int
+        tets whose signed volume is <= 0 (inverted or flat)
+    worst_volume_ratio : float
+        smallest V / V_rest over all tets [-] (negative once one inverts; NaN for a model without tets)
+    tet_count : int
+        tets checked (0 for a model built from arrays)
     """
 
     count: int
@@ -118,7 +120,8 @@ def tet_inversion(system, x) -> TetInversion:
     Parameters
     ----------
     system : Scene or Model
-    x : (n, 3) float -- node positions [m]
+    x : (n, 3) float
+        node positions [m]
 
     Returns
     -------

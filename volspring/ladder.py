@@ -124,9 +124,12 @@ class TetMaterials:
         Parameters
         ----------
         tet_count : int
-        material : Material -- for every tet whose region has no entry in ``materials``
-        regions : (T,) int, optional -- a region tag per tet (>= 0)
-        materials : mapping of int to Material, optional -- requires ``regions``
+        material : Material
+            for every tet whose region has no entry in ``materials``
+        regions : (T,) int, optional
+            a region tag per tet (>= 0)
+        materials : mapping of int to Material, optional
+            requires ``regions``
         """
         if not isinstance(material, Material):
             raise TypeError(f"material must be a volspring.Material, got {type(material).__name__}")
@@ -312,13 +315,15 @@ def network_moduli(mesh, springs) -> tuple:
 
     Parameters
     ----------
-    mesh : TetMesh -- the springs' nodes 0..n-1 are the mesh's nodes (springs to other nodes, shells,
-        are left out)
-    springs : Springs -- at rest
+    mesh : TetMesh
+        the springs' nodes 0..n-1 are the mesh's nodes (springs to other nodes, shells, are left out)
+    springs : Springs
+        at rest
 
     Returns
     -------
-    mu_s, K_s : float -- [Pa]
+    mu_s, K_s : float
+        [Pa]
     """
     stiffness = _network_stiffness(mesh, springs)
     held = _held_probe(mesh, stiffness)

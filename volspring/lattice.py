@@ -85,11 +85,16 @@ class LatticeConstants:
 
     Parameters
     ----------
-    structural, face, body, bend : float -- k1, k2, k3, kb [N/m] of a spring with share 1
-    joint : float -- ka [N m / rad^2] of a right-angle joint with share 1
-    lame_lambda, shear_modulus : float -- the lattice's Lame constants [Pa]
-    E : float -- its Young's modulus [Pa] (the material's)
-    nu : float -- its Poisson ratio [-]
+    structural, face, body, bend : float
+        k1, k2, k3, kb [N/m] of a spring with share 1
+    joint : float
+        ka [N m / rad^2] of a right-angle joint with share 1
+    lame_lambda, shear_modulus : float
+        the lattice's Lame constants [Pa]
+    E : float
+        its Young's modulus [Pa] (the material's)
+    nu : float
+        its Poisson ratio [-]
     """
 
     structural: float
@@ -110,8 +115,10 @@ def lattice_constants(material: Material, cell_size: float, *, shear: bool = Tru
     Parameters
     ----------
     material : Material
-    cell_size : float -- h [m]
-    shear, bend, angles : bool -- which families the lattice has (module docstring)
+    cell_size : float
+        h [m]
+    shear, bend, angles : bool
+        which families the lattice has (module docstring)
 
     Raises
     ------
@@ -146,13 +153,17 @@ class LatticeBody:
 
     Parameters
     ----------
-    model : Model -- masses, springs (and angle springs); node i is ``lattice.points[i]``
-    lattice : Lattice -- cells, fractions, nodes
-    constants : LatticeConstants -- the rule's constants and the solid they make
-    spring_family : (s,) int8 -- index into :data:`meshing.lattice.LATTICE_FAMILIES` of each spring of
-        ``model.springs``
-    anchor : LatticeAnchor or None -- the body's own surface, bound to the lattice (for the output
-        writers, e.g. ``BlenderWriter(directory, body.anchor)``); None for a lattice built without one
+    model : Model
+        masses, springs (and angle springs); node i is ``lattice.points[i]``
+    lattice : Lattice
+        cells, fractions, nodes
+    constants : LatticeConstants
+        the rule's constants and the solid they make
+    spring_family : (s,) int8
+        index into :data:`meshing.lattice.LATTICE_FAMILIES` of each spring of ``model.springs``
+    anchor : LatticeAnchor or None
+        the body's own surface, bound to the lattice (for the output writers, e.g. ``BlenderWriter(directory,
+        body.anchor)``); None for a lattice built without one
     """
 
     model: Model
@@ -182,15 +193,19 @@ def lattice_model(lattice: Lattice, material: Material, *, shear: bool = True, b
     ----------
     lattice : Lattice
     material : Material
-    shear, bend, angles : bool -- spring families: shear (face and body diagonals), bend (skip-one along
-        grid lines), angle springs at the right-angle corners of the cell faces
-    rule : {"isotropic"} -- the stiffness rule
-    damping_ratio : float, optional -- zeta >= 0: each spring gets k_d = 2 zeta sqrt(k m_i m_j / (m_i + m_j))
-        (critical damping of the two-body oscillator), as for tet springs
+    shear, bend, angles : bool
+        spring families: shear (face and body diagonals), bend (skip-one along grid lines), angle springs at the
+        right-angle corners of the cell faces
+    rule : {"isotropic"}
+        the stiffness rule
+    damping_ratio : float, optional
+        zeta >= 0: each spring gets k_d = 2 zeta sqrt(k m_i m_j / (m_i + m_j)) (critical damping of the two-body
+        oscillator), as for tet springs
 
     Returns
     -------
-    LatticeBody -- without anchor (see :func:`lattice_body`, or :func:`meshing.lattice.anchor_lattice`)
+    LatticeBody
+        without anchor (see :func:`lattice_body`, or :func:`meshing.lattice.anchor_lattice`)
     """
     if not isinstance(lattice, Lattice):
         raise TypeError(f"lattice must be a meshing.lattice.Lattice, got {type(lattice).__name__}")
@@ -233,18 +248,23 @@ def lattice_body(body, cell_size: float, material: Material, *, shear: bool = Tr
 
     Parameters
     ----------
-    body : trimesh.Trimesh or Shape -- closed, outward-wound surface [m], or a :class:`meshing.Shape`
-    cell_size : float -- edge of the cubic cells [m]
+    body : trimesh.Trimesh or Shape
+        closed, outward-wound surface [m], or a :class:`meshing.Shape`
+    cell_size : float
+        edge of the cubic cells [m]
     material : Material
-    shear, bend, angles, rule, damping_ratio -- see :func:`lattice_model`
-    samples : int -- sub-grid points per axis for the inside fraction of boundary cells
-        (:func:`meshing.lattice.voxelize`)
-    surface_size : float, optional -- for a Shape: edge length of its triangle surface [m]; default a
-        quarter cell (faceting then changes a sphere's volume by about 0.1% at 10 cells across)
+    shear, bend, angles, rule, damping_ratio
+        see :func:`lattice_model`
+    samples : int
+        sub-grid points per axis for the inside fraction of boundary cells (:func:`meshing.lattice.voxelize`)
+    surface_size : float, optional
+        for a Shape: edge length of its triangle surface [m]; default a quarter cell (faceting then changes a sphere's
+        volume by about 0.1% at 10 cells across)
 
     Returns
     -------
-    LatticeBody -- with ``anchor``, the surface bound to the lattice
+    LatticeBody
+        with ``anchor``, the surface bound to the lattice
 
     Raises
     ------
@@ -287,9 +307,11 @@ def box_lattice_model(mesh, material: Material, **options) -> LatticeBody:
 
     Parameters
     ----------
-    mesh : TetMesh -- a structured box with cubic cells
+    mesh : TetMesh
+        a structured box with cubic cells
     material : Material
-    **options -- for :func:`lattice_model` (shear, bend, angles, rule, damping_ratio)
+    **options
+        for :func:`lattice_model` (shear, bend, angles, rule, damping_ratio)
 
     Raises
     ------

@@ -82,11 +82,12 @@ class Material:
 
     Parameters
     ----------
-    E : float -- Young's modulus [Pa], > 0
-    nu : float -- Poisson's ratio [-], -1 < nu < 0.5
-    density : float -- mass density [kg/m^3], > 0
-
-    Any real number is taken (Python or numpy scalars) and stored as a float.
+    E : float
+        Young's modulus [Pa], > 0
+    nu : float
+        Poisson's ratio [-], -1 < nu < 0.5
+    density : float
+        mass density [kg/m^3], > 0
 
     Raises
     ------
@@ -94,6 +95,10 @@ class Material:
         For a value that is not a real number (a bool, a string), naming the parameter.
     ValueError
         For a value out of its range or not finite, e.g. ``nu = 0.5 is not in (-1, 0.5)``.
+
+    Notes
+    -----
+    Any real number is taken (Python or numpy scalars) and stored as a float.
 
     Examples
     --------

@@ -49,21 +49,30 @@ class Model:
 
     Parameters
     ----------
-    rest_positions : (n, 3) float -- rest positions of the nodes [m]
-    masses : (n,) float -- lumped node masses [kg], > 0
-    elements : sequence of ElementSet -- the internal forces (:mod:`volspring.elements`); at most
-        one :class:`~volspring.elements.Springs`
-    topology : SpringTopology or None -- where the model came from, if from a mesh (for several
-        bodies, its mesh is the union of their placed tet meshes)
-    material : Material or None -- the material of every body; None when bodies differ (or none given)
-    rule : str -- the stiffness rule used, "arrays", or "mixed" (bodies with different rules)
-    node_body : (n,) int, optional -- body id of every node, 0 to b - 1; default all 0 (one body)
-    materials : sequence of Material or None, optional -- one per body; default ``(material,)``
-        for every body
-    body_names : sequence of str, optional -- one per body; default all ""
-    rung : str -- the model's rung of the ladder (:data:`volspring.ladder.MODELS`), "springs" by
-        default; a model built from arrays or with extra element sets keeps the name it was given
+    rest_positions : (n, 3) float
+        rest positions of the nodes [m]
+    masses : (n,) float
+        lumped node masses [kg], > 0
+    elements : sequence of ElementSet
+        the internal forces (:mod:`volspring.elements`); at most one :class:`~volspring.elements.Springs`
+    topology : SpringTopology or None
+        where the model came from, if from a mesh (for several bodies, its mesh is the union of their placed tet meshes)
+    material : Material or None
+        the material of every body; None when bodies differ (or none given)
+    rule : str
+        the stiffness rule used, "arrays", or "mixed" (bodies with different rules)
+    node_body : (n,) int, optional
+        body id of every node, 0 to b - 1; default all 0 (one body)
+    materials : sequence of Material or None, optional
+        one per body; default ``(material,)`` for every body
+    body_names : sequence of str, optional
+        one per body; default all ""
+    rung : str
+        the model's rung of the ladder (:data:`volspring.ladder.MODELS`), "springs" by default; a model built from
+        arrays or with extra element sets keeps the name it was given
 
+    Notes
+    -----
     Use :meth:`from_mesh`, :meth:`from_arrays` or :meth:`from_bodies` rather than the constructor,
     and :meth:`with_elements` to add element sets. All refuse input they would misread: a TypeError
     for what is not numbers (bools, strings; numpy scalars are numbers) or for non-integer spring
@@ -130,12 +139,18 @@ class Model:
 
         Parameters
         ----------
-        positions : (n, 3) float -- rest positions [m]
-        masses : (n,) float -- node masses [kg]
-        springs : (s, 2) int -- node pairs
-        stiffness : float or (s,) float -- k [N/m] for ``law="hooke"``, [N] for ``law="strain"``
-        damping : float or (s,) float -- k_d [N s/m]
-        rest_lengths : (s,) float, optional -- defaults to the distances in ``positions`` [m]
+        positions : (n, 3) float
+            rest positions [m]
+        masses : (n,) float
+            node masses [kg]
+        springs : (s, 2) int
+            node pairs
+        stiffness : float or (s,) float
+            k [N/m] for ``law="hooke"``, [N] for ``law="strain"``
+        damping : float or (s,) float
+            k_d [N s/m]
+        rest_lengths : (s,) float, optional
+            defaults to the distances in ``positions`` [m]
         law : {"hooke", "strain"}
 
         Raises
@@ -173,22 +188,30 @@ class Model:
         Parameters
         ----------
         body : TetMesh or SpringTopology
-        material : Material -- of every tet (or every tet whose region ``materials`` does not name)
-        model : {"springs", "springs+volume", "smoothed"} -- the rung (:mod:`volspring.ladder`):
-            springs only, springs with a nodal volume term that honours nu, or the smoothed-strain
-            element (FEM-accurate)
-        rule : {"van_gelder", "lloyd", "uniform"} -- stiffness rule (see the module docstring)
-        stiffness : float, optional -- the raw constant, >= 0, required by ``rule="uniform"`` only
-        law : {"hooke", "strain"} -- how the raw ``uniform`` constant is read (``uniform`` only)
-        damping_ratio : float, optional -- zeta >= 0: per spring (see the module docstring); for the
-            continuum sets of the upper rungs, Rayleigh stiffness damping b = 2 zeta / omega_max (zeta
-            at the model's highest frequency, as a spring's ratio is at its own)
-        damping : float or (s,) float, optional -- k_d [N s/m] of the springs, instead of ``damping_ratio``
-        alpha : float, optional -- ``model="smoothed"`` only: the weight in [0, 1] of the nodal
-            (smoothed) shear; default :data:`volspring.ladder.DEFAULT_ALPHA`
-        regions : (m,) int, optional -- a region tag per tet, for ``materials``; on the smoothed rung
-            smoothing domains never cross regions
-        materials : mapping of int to Material, optional -- the material of each region tag
+        material : Material
+            of every tet (or every tet whose region ``materials`` does not name)
+        model : {"springs", "springs+volume", "smoothed"}
+            the rung (:mod:`volspring.ladder`): springs only, springs with a nodal volume term that honours nu, or the
+            smoothed-strain element (FEM-accurate)
+        rule : {"van_gelder", "lloyd", "uniform"}
+            stiffness rule (see the module docstring)
+        stiffness : float, optional
+            the raw constant, >= 0, required by ``rule="uniform"`` only
+        law : {"hooke", "strain"}
+            how the raw ``uniform`` constant is read (``uniform`` only)
+        damping_ratio : float, optional
+            zeta >= 0: per spring (see the module docstring); for the continuum sets of the upper rungs, Rayleigh
+            stiffness damping b = 2 zeta / omega_max (zeta at the model's highest frequency, as a spring's ratio is at
+            its own)
+        damping : float or (s,) float, optional
+            k_d [N s/m] of the springs, instead of ``damping_ratio``
+        alpha : float, optional
+            ``model="smoothed"`` only: the weight in [0, 1] of the nodal (smoothed) shear; default
+            :data:`volspring.ladder.DEFAULT_ALPHA`
+        regions : (m,) int, optional
+            a region tag per tet, for ``materials``; on the smoothed rung smoothing domains never cross regions
+        materials : mapping of int to Material, optional
+            the material of each region tag
 
         Raises
         ------

@@ -33,9 +33,12 @@ class ModalResult:
 
     Parameters
     ----------
-    frequencies : (k,) float -- ascending [Hz]
-    eigenvalues : (k,) float -- omega^2 [1/s^2] (may be slightly negative for rigid modes: round-off)
-    shapes : (k, n, 3) float -- mass-normalised mode shapes (phi^T M phi = 1), 0 on held components
+    frequencies : (k,) float
+        ascending [Hz]
+    eigenvalues : (k,) float
+        omega^2 [1/s^2] (may be slightly negative for rigid modes: round-off)
+    shapes : (k, n, 3) float
+        mass-normalised mode shapes (phi^T M phi = 1), 0 on held components
     """
 
     frequencies: np.ndarray
@@ -48,9 +51,12 @@ def system_matrices(scene, *, x=None, t=0.0):
 
     Returns
     -------
-    K : (d, d) CSR -- [N/m]
-    masses : (d,) float -- [kg]
-    dofs : (d,) int -- model unknown (3 node + component) of each free component
+    K : (d, d) CSR
+        [N/m]
+    masses : (d,) float
+        [kg]
+    dofs : (d,) int
+        model unknown (3 node + component) of each free component
     """
     model = scene.model
     x = model.rest_positions if x is None else np.asarray(x, dtype=np.float64)
@@ -69,11 +75,16 @@ def solve_modes(scene, *, count=6, x=None, t=0.0, dense_dofs=DENSE_DOFS) -> Moda
 
     Parameters
     ----------
-    scene : Scene -- model, supports (held components are fixed) and forces (their stiffness counts)
-    count : int -- modes wanted, >= 1
-    x : (n, 3) float, optional -- configuration [m]
-    t : float -- time at which the forces' Jacobians are evaluated [s]
-    dense_dofs : int -- up to this many free components, solve densely
+    scene : Scene
+        model, supports (held components are fixed) and forces (their stiffness counts)
+    count : int
+        modes wanted, >= 1
+    x : (n, 3) float, optional
+        configuration [m]
+    t : float
+        time at which the forces' Jacobians are evaluated [s]
+    dense_dofs : int
+        up to this many free components, solve densely
 
     Returns
     -------

@@ -39,13 +39,17 @@ class State:
 
     Parameters
     ----------
-    x : (n, 3) float -- positions [m]
-    v : (n, 3) float -- velocities [m/s]
-    t : float -- time [s]
-    step : int -- number of steps taken to reach this state
-    memory : dict -- what an integrator carries from step to step (previous positions and step of
-        the Verlet family, the implicit solver's warm start); part of the state so that a
-        checkpoint of the state resumes bit-identically
+    x : (n, 3) float
+        positions [m]
+    v : (n, 3) float
+        velocities [m/s]
+    t : float
+        time [s]
+    step : int
+        number of steps taken to reach this state
+    memory : dict
+        what an integrator carries from step to step (previous positions and step of the Verlet family, the implicit
+        solver's warm start); part of the state so that a checkpoint of the state resumes bit-identically
     """
 
     x: np.ndarray
@@ -65,25 +69,28 @@ class Scene:
     Parameters
     ----------
     model : Model
-    forces : sequence of force objects (see the module docstring), e.g. ``Gravity``, ``Drag``
-    pins : Pins, optional -- whole nodes held or moved (the shorthand support)
-    obstacles : sequence -- non-penetration obstacles, projected after each step
-    constraints : sequence -- position projections (distance constraints, strain limiting; meant
-        for the Verlet family), projected after each step
-    supports : sequence of Pins, Prescribed or Sliding -- supports per component
-        (:mod:`volspring.supports`), beside ``pins``
+    forces : sequence of force objects
+        (see the module docstring), e.g. ``Gravity``, ``Drag``
+    pins : Pins, optional
+        whole nodes held or moved (the shorthand support)
+    obstacles : sequence
+        non-penetration obstacles, projected after each step
+    constraints : sequence
+        position projections (distance constraints, strain limiting; meant for the Verlet family), projected after each
+        step
+    supports : sequence of Pins, Prescribed or Sliding
+        supports per component (:mod:`volspring.supports`), beside ``pins``
 
     Attributes
     ----------
-    held : (n, 3) bool -- the components any support prescribes (read-only)
-    free : (n,) bool -- nodes with at least one free component
-    model : Model -- the model given, adapted to the nodes the supports hold in all three components
-        (:meth:`Model.supported`): the smoothed rung pairs its volume domains anew so that no domain is
-        held whole (a domain of held nodes only would lock the free nodes around it); any other model,
-        or a scene without supports, keeps the very model given
-
-    Obstacles and constraints have ``project(x, v, x_start, t, dt, free)``: after a step from
-    ``x_start`` they move the free nodes' positions ``x`` (and fix velocities ``v``) in place.
+    held : (n, 3) bool
+        the components any support prescribes (read-only)
+    free : (n,) bool
+        nodes with at least one free component
+    model : Model
+        the model given, adapted to the nodes the supports hold in all three components (:meth:`Model.supported`): the
+        smoothed rung pairs its volume domains anew so that no domain is held whole (a domain of held nodes only would
+        lock the free nodes around it); any other model, or a scene without supports, keeps the very model given
 
     Raises
     ------
@@ -93,6 +100,11 @@ class Scene:
     ValueError
         A pinned node the model does not have, a pin mask of another length, or a built-in force
         (Gravity, Drag, Wind, PointAttractor, PointRepulser, Vortex) whose masses are not one per node.
+
+    Notes
+    -----
+    Obstacles and constraints have ``project(x, v, x_start, t, dt, free)``: after a step from
+    ``x_start`` they move the free nodes' positions ``x`` (and fix velocities ``v``) in place.
     """
 
     model: Model

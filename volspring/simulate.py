@@ -78,17 +78,26 @@ class SimulationResult:
 
     Parameters
     ----------
-    state : State -- the last state reached
-    time : (f,) float -- frame times [s]
-    step : (f,) int -- step count of each frame's state
-    kinetic_energy, potential_energy, total_energy : (f,) float -- [J]
-    linear_momentum : (f, 3) float -- [kg m/s]
-    angular_momentum : (f, 3) float -- about the centre of mass [kg m^2/s]
-    inverted_tets : (f,) int -- tets turned inside out (signed volume <= 0) at each frame
-    worst_volume_ratio : (f,) float -- smallest V / V_rest over the tets at each frame [-]
-        (NaN for a model without tets)
-    steps_taken : int -- steps taken by this run
-    stopped_early : bool -- the callback returned False
+    state : State
+        the last state reached
+    time : (f,) float
+        frame times [s]
+    step : (f,) int
+        step count of each frame's state
+    kinetic_energy, potential_energy, total_energy : (f,) float
+        [J]
+    linear_momentum : (f, 3) float
+        [kg m/s]
+    angular_momentum : (f, 3) float
+        about the centre of mass [kg m^2/s]
+    inverted_tets : (f,) int
+        tets turned inside out (signed volume <= 0) at each frame
+    worst_volume_ratio : (f,) float
+        smallest V / V_rest over the tets at each frame [-] (NaN for a model without tets)
+    steps_taken : int
+        steps taken by this run
+    stopped_early : bool
+        the callback returned False
     """
 
     state: State
@@ -210,21 +219,29 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
     Parameters
     ----------
     scene : Scene
-    integrator : Integrator or str -- an integrator or a registered name (``make_integrator``)
-    duration : float -- simulated time to run [s], >= 0
-    dt : float -- time step [s], > 0
-    state : State, optional -- where to start (e.g. a checkpoint); default ``scene.initial_state()``
-    frame_dt : float, optional -- time between frames [s]; default every step is a frame
-    callback : callable, optional -- ``callback(frame_index, state)`` at every frame; return
-        ``False`` to stop the run
-    guard : {"warn", "raise", "off"} -- check ``dt`` against an explicit integrator's stability
-        limit before the first step (:class:`~volspring.stability.StabilityGuard`)
-    energy_limit : float, optional -- total energy [J] above which the run has diverged; default
-        the relative runaway check of the module docstring
-    runaway_factor : float -- allowance of the default runaway check, in units of the start's
-        energy scale (``math.inf`` turns the energy check off; NaN detection remains)
-    runaway_checks : int -- consecutive checks at which the excess must be above the allowance
-        and growing before the run counts as diverged (>= 1)
+    integrator : Integrator or str
+        an integrator or a registered name (``make_integrator``)
+    duration : float
+        simulated time to run [s], >= 0
+    dt : float
+        time step [s], > 0
+    state : State, optional
+        where to start (e.g. a checkpoint); default ``scene.initial_state()``
+    frame_dt : float, optional
+        time between frames [s]; default every step is a frame
+    callback : callable, optional
+        ``callback(frame_index, state)`` at every frame; return ``False`` to stop the run
+    guard : {"warn", "raise", "off"}
+        check ``dt`` against an explicit integrator's stability limit before the first step
+        (:class:`~volspring.stability.StabilityGuard`)
+    energy_limit : float, optional
+        total energy [J] above which the run has diverged; default the relative runaway check of the module docstring
+    runaway_factor : float
+        allowance of the default runaway check, in units of the start's energy scale (``math.inf`` turns the energy
+        check off; NaN detection remains)
+    runaway_checks : int
+        consecutive checks at which the excess must be above the allowance and growing before the run counts as diverged
+        (>= 1)
 
     Returns
     -------
@@ -232,8 +249,10 @@ def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=Non
 
     Raises
     ------
-    SimulationDiverged -- NaN/Inf or runaway energy, naming step, time, dt and the worst node
-    StepTooLarge -- with ``guard="raise"``, before any step
+    SimulationDiverged
+        NaN/Inf or runaway energy, naming step, time, dt and the worst node
+    StepTooLarge
+        with ``guard="raise"``, before any step
 
     Examples
     --------

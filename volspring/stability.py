@@ -84,12 +84,15 @@ def omega_max_bound(system, *, x=None) -> float:
 
     Parameters
     ----------
-    system : Scene or Model -- a scene's pinned nodes are left out
-    x : (n, 3) float, optional -- configuration of the stiffness blocks [m]; default the rest shape
+    system : Scene or Model
+        a scene's pinned nodes are left out
+    x : (n, 3) float, optional
+        configuration of the stiffness blocks [m]; default the rest shape
 
     Returns
     -------
-    float -- omega with omega^2 >= every eigenvalue of M^-1 K on the free dofs
+    float
+        omega with omega^2 >= every eigenvalue of M^-1 K on the free dofs
     """
     model, free = _model_and_free(system)
     if not model.elements or not free.any():
@@ -124,14 +127,18 @@ def omega_max_estimate(system, *, x=None, exact_dofs=EXACT_DOFS) -> float:
 
     Parameters
     ----------
-    system : Scene or Model -- a scene's pinned nodes are left out
-    x : (n, 3) float, optional -- configuration of the stiffness blocks [m]; default the rest shape
-    exact_dofs : int -- up to this many free dofs the value is exact (dense or tight Lanczos);
-        above it, loose Lanczos times ``LANCZOS_SAFETY`` (never below the exact value in practice)
+    system : Scene or Model
+        a scene's pinned nodes are left out
+    x : (n, 3) float, optional
+        configuration of the stiffness blocks [m]; default the rest shape
+    exact_dofs : int
+        up to this many free dofs the value is exact (dense or tight Lanczos); above it, loose Lanczos times
+        ``LANCZOS_SAFETY`` (never below the exact value in practice)
 
     Returns
     -------
-    float -- omega_max [rad/s]
+    float
+        omega_max [rad/s]
     """
     from scipy.linalg import eigvalsh
     from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, eigsh
@@ -179,12 +186,14 @@ def critical_step(integrator, omega_max: float) -> float:
     Parameters
     ----------
     integrator : Integrator, Integrator subclass or registered name
-    omega_max : float -- highest angular frequency of the free dofs [rad/s]
+    omega_max : float
+        highest angular frequency of the free dofs [rad/s]
 
     Returns
     -------
-    float -- 0 for schemes unstable at any step (explicit and midpoint Euler), inf for
-    unconditionally stable ones or when nothing oscillates (omega_max = 0)
+    float
+        0 for schemes unstable at any step (explicit and midpoint Euler), inf for unconditionally stable ones or when
+        nothing oscillates (omega_max = 0)
     """
     limit = _integrator_class(integrator).stability_limit
     if not math.isfinite(omega_max) or omega_max < 0:
@@ -231,15 +240,20 @@ class StabilityGuard:
     ----------
     scene : Scene
     integrator : Integrator, Integrator subclass or registered name
-    action : {"warn", "raise", "off"} -- on a step too large, warn with
-        :class:`~volspring.errors.StepTooLargeWarning`, raise :class:`~volspring.errors.StepTooLarge`, or do nothing
-    method : {"estimate", "bound"} -- which omega_max (computed once per guard, on the first check)
-    growth_limit : float -- for schemes unstable at every step (stability_limit 0), the largest
-        tolerated growth of the fastest undamped mode's amplitude over the planned steps
-    omega_max : float, optional -- omega_max of the scene's free dofs [rad/s] when the caller knows
-        it already (e.g. from :func:`omega_max`, to check many steps or integrators on one scene
-        without estimating it again); ``method`` is then not used
+    action : {"warn", "raise", "off"}
+        on a step too large, warn with :class:`~volspring.errors.StepTooLargeWarning`, raise
+        :class:`~volspring.errors.StepTooLarge`, or do nothing
+    method : {"estimate", "bound"}
+        which omega_max (computed once per guard, on the first check)
+    growth_limit : float
+        for schemes unstable at every step (stability_limit 0), the largest tolerated growth of the fastest undamped
+        mode's amplitude over the planned steps
+    omega_max : float, optional
+        omega_max of the scene's free dofs [rad/s] when the caller knows it already (e.g. from :func:`omega_max`, to
+        check many steps or integrators on one scene without estimating it again); ``method`` is then not used
 
+    Notes
+    -----
     A step is too large when ``dt > stability_limit / omega_max``, or, for schemes with
     ``stability_limit == 0``, when ``growth_per_step(h omega_max) ** steps > growth_limit``.
     Implicit integrators always pass. Damping is left out (it only helps explicit Euler).

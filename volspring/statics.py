@@ -58,12 +58,18 @@ class StaticResult:
 
     Parameters
     ----------
-    x : (n, 3) float -- equilibrium positions [m]
-    residual : float -- ||F_free|| / ||load_free|| at x [-]
-    iterations : int -- Newton iterations taken
-    energy : float -- total potential energy at x [J]
-    residual_history : (iterations + 1,) float -- relative residual before each iteration and at the end
-    linear_iterations : tuple of int -- CG iterations of each Newton step (0 for the direct solver)
+    x : (n, 3) float
+        equilibrium positions [m]
+    residual : float
+        ||F_free|| / ||load_free|| at x [-]
+    iterations : int
+        Newton iterations taken
+    energy : float
+        total potential energy at x [J]
+    residual_history : (iterations + 1,) float
+        relative residual before each iteration and at the end
+    linear_iterations : tuple of int
+        CG iterations of each Newton step (0 for the direct solver)
     """
 
     x: np.ndarray
@@ -86,17 +92,25 @@ def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver=
 
     Parameters
     ----------
-    scene : Scene -- model, loads (forces with ``potential_energy`` enter the line search
-        merit; with a non-conservative force the merit is ||F|| instead) and pins
-    x0 : (n, 3) float, optional -- starting positions [m]; the rest positions by default
-    t : float -- time at which loads and pin positions are evaluated [s]
-    rtol : float -- target ||F_free|| / ||load_free|| (raised to the round-off floor of the spring
-        forces where that is larger; see the module docstring)
-    max_iterations : int -- Newton iterations at most
-    solver : {"amg", "jacobi", "direct"} -- linear solver of the Newton steps
-    linear_rtol : float -- CG tolerance of each Newton step (inexact Newton)
-    clamp_compression : bool -- use the clamped (positive semi-definite) stiffness instead of
-        the exact Hessian (a quasi-Newton step; see the module docstring)
+    scene : Scene
+        model, loads (forces with ``potential_energy`` enter the line search merit; with a non-conservative force the
+        merit is ||F|| instead) and pins
+    x0 : (n, 3) float, optional
+        starting positions [m]; the rest positions by default
+    t : float
+        time at which loads and pin positions are evaluated [s]
+    rtol : float
+        target ||F_free|| / ||load_free|| (raised to the round-off floor of the spring forces where that is larger; see
+        the module docstring)
+    max_iterations : int
+        Newton iterations at most
+    solver : {"amg", "jacobi", "direct"}
+        linear solver of the Newton steps
+    linear_rtol : float
+        CG tolerance of each Newton step (inexact Newton)
+    clamp_compression : bool
+        use the clamped (positive semi-definite) stiffness instead of the exact Hessian (a quasi-Newton step; see the
+        module docstring)
 
     Returns
     -------

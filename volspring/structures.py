@@ -64,22 +64,35 @@ def string(start, end=None, *, count, length=None, direction=(0.0, 0.0, -1.0), l
 
     Parameters
     ----------
-    start : (3,) float -- first node [m]
-    end : (3,) float, optional -- last node [m]; without it the string runs ``length`` along ``direction``
-    count : int -- nodes, >= 2
-    length : float, optional -- length [m] when ``end`` is not given
-    direction : (3,) float -- direction from ``start`` when ``end`` is not given (default down, -z)
-    linear_density : float, optional -- mass per length of the string as built [kg/m] ...
-    mass : float, optional -- ... or its total mass [kg] (one of the two)
-    axial_stiffness : float, optional -- EA [N]: segment springs k = EA / l_s ...
-    stiffness : float, optional -- ... or the stiffness of every segment spring k [N/m] (one of the two)
-    tension : float, optional -- rest lengths chosen so that the string as built carries this tension [N] ...
-    rest_length : float, optional -- ... or the total rest length [m]; default: the built length (no tension)
-    damping : float -- damper of every segment k_d [N s/m]
+    start : (3,) float
+        first node [m]
+    end : (3,) float, optional
+        last node [m]; without it the string runs ``length`` along ``direction``
+    count : int
+        nodes, >= 2
+    length : float, optional
+        length [m] when ``end`` is not given
+    direction : (3,) float
+        direction from ``start`` when ``end`` is not given (default down, -z)
+    linear_density : float, optional
+        mass per length of the string as built [kg/m] ...
+    mass : float, optional
+        ... or its total mass [kg] (one of the two)
+    axial_stiffness : float, optional
+        EA [N]: segment springs k = EA / l_s ...
+    stiffness : float, optional
+        ... or the stiffness of every segment spring k [N/m] (one of the two)
+    tension : float, optional
+        rest lengths chosen so that the string as built carries this tension [N] ...
+    rest_length : float, optional
+        ... or the total rest length [m]; default: the built length (no tension)
+    damping : float
+        damper of every segment k_d [N s/m]
 
     Returns
     -------
-    Model -- nodes 0 .. count - 1 from start to end
+    Model
+        nodes 0 .. count - 1 from start to end
 
     Raises
     ------
@@ -142,13 +155,21 @@ def strand_points(start, direction, length, count, *, curl_radius=0.0, curl_pitc
 
     Parameters
     ----------
-    start : (3,) float -- the root [m]
-    direction : (3,) float -- the strand's direction (the helix axis) from the root
-    length : float -- arc length of the strand [m]
-    count : int -- nodes, >= 2
-    curl_radius : float -- helix radius R [m]; 0 (default) for a straight strand
-    curl_pitch : float, optional -- rise per turn of the helix along its axis [m], > 0; needed when R > 0
+    start : (3,) float
+        the root [m]
+    direction : (3,) float
+        the strand's direction (the helix axis) from the root
+    length : float
+        arc length of the strand [m]
+    count : int
+        nodes, >= 2
+    curl_radius : float
+        helix radius R [m]; 0 (default) for a straight strand
+    curl_pitch : float, optional
+        rise per turn of the helix along its axis [m], > 0; needed when R > 0
 
+    Notes
+    -----
     The helix passes through the root and turns about the axis through start + R n, n a unit
     vector normal to the direction: x(s) = start + R (1 - cos t) n + R sin t b + p t / (2 pi) d,
     t = 2 pi s / sqrt((2 pi R)^2 + p^2), s the arc length.
@@ -179,23 +200,32 @@ def hair(points, *, bending_stiffness, axial_stiffness, linear_density=None, mas
 
     Parameters
     ----------
-    points : (n, 3) float -- rest shape, root first [m], n >= 3 (e.g. :func:`strand_points`)
-    bending_stiffness : float -- EI [N m^2], >= 0
-    axial_stiffness : float -- EA [N], > 0
-    linear_density : float, optional -- mass per length [kg/m] ...
-    mass : float, optional -- ... or the total mass [kg] (one of the two)
-    torsional_stiffness : float, optional -- GJ [N m^2], >= 0; default EI / (1 + nu) with nu = 0.3, a solid
-        round fibre (GJ = G 2 I); 0 adds no twist springs, nor does a straight strand
-    damping : float -- damper of every segment spring k_d [N s/m]
-    root : {"clamped", "free"} -- "clamped" (default): the first segment is the root, held in place by the
-        caller (pin nodes 0 and 1), so the joint at node 1 stands for half a segment of free strand and
-        gets k = EI / (l_1 / 2); with the uniform EI / l_1 the clamp would be too soft by that half segment, a
-        relative error 2 / (count - 2) in the tip deflection of a cantilever. "free": every joint EI / l_j.
+    points : (n, 3) float
+        rest shape, root first [m], n >= 3 (e.g. :func:`strand_points`)
+    bending_stiffness : float
+        EI [N m^2], >= 0
+    axial_stiffness : float
+        EA [N], > 0
+    linear_density : float, optional
+        mass per length [kg/m] ...
+    mass : float, optional
+        ... or the total mass [kg] (one of the two)
+    torsional_stiffness : float, optional
+        GJ [N m^2], >= 0; default EI / (1 + nu) with nu = 0.3, a solid round fibre (GJ = G 2 I); 0 adds no twist
+        springs, nor does a straight strand
+    damping : float
+        damper of every segment spring k_d [N s/m]
+    root : {"clamped", "free"}
+        "clamped" (default): the first segment is the root, held in place by the caller (pin nodes 0 and 1), so the
+        joint at node 1 stands for half a segment of free strand and gets k = EI / (l_1 / 2); with the uniform EI / l_1
+        the clamp would be too soft by that half segment, a relative error 2 / (count - 2) in the tip deflection of a
+        cantilever. "free": every joint EI / l_j.
 
     Returns
     -------
-    Model -- segment springs, one :class:`~volspring.elements.AngleSprings` and, for a curl, one
-    :class:`~volspring.elements.angles.DihedralSprings`
+    Model
+        segment springs, one :class:`~volspring.elements.AngleSprings` and, for a curl, one
+        :class:`~volspring.elements.angles.DihedralSprings`
 
     Examples
     --------
@@ -305,18 +335,24 @@ def sheet_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0
 
     Parameters
     ----------
-    width, height : float -- side lengths [m], > 0
-    nx, ny : int -- cells along the width and the height, >= 1
-    origin : (3,) float -- corner node 0 [m]
-    axes : ((3,) float, (3,) float) -- directions of the width and the height, orthogonal; a flag hangs
-        from its top edge with ``axes=((1, 0, 0), (0, 0, -1))``
+    width, height : float
+        side lengths [m], > 0
+    nx, ny : int
+        cells along the width and the height, >= 1
+    origin : (3,) float
+        corner node 0 [m]
+    axes : ((3,) float, (3,) float)
+        directions of the width and the height, orthogonal; a flag hangs from its top edge with ``axes=((1, 0, 0), (0,
+        0, -1))``
 
     Returns
     -------
-    points : (n, 3) float -- node (i, j), i = 0 .. nx along the width, j = 0 .. ny along the height, is
-        number j (nx + 1) + i [m]; the corners are 0, nx, ny (nx + 1) and n - 1
-    triangles : (2 nx ny, 3) int -- every cell cut along its diagonal from node (i, j), normals along
-        axes[0] x axes[1] (the render surface; :func:`cloth_grid`'s springs do not depend on the cut)
+    points : (n, 3) float
+        node (i, j), i = 0 .. nx along the width, j = 0 .. ny along the height, is number j (nx + 1) + i [m]; the
+        corners are 0, nx, ny (nx + 1) and n - 1
+    triangles : (2 nx ny, 3) int
+        every cell cut along its diagonal from node (i, j), normals along axes[0] x axes[1] (the render surface;
+        :func:`cloth_grid`'s springs do not depend on the cut)
     """
     width, height = _positive("width", width), _positive("height", height)
     nx, ny = _cells("nx", nx), _cells("ny", ny)
@@ -358,20 +394,28 @@ def cloth_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0
     Parameters
     ----------
     width, height, nx, ny, origin, axes : as for :func:`sheet_grid`
-    areal_density : float, optional -- mass per area [kg/m^2] ...
-    mass : float, optional -- ... or the total mass [kg] (one of the two)
-    membrane_stiffness : float, optional -- E t [N/m], the rule above ...
-    stretch_stiffness : float, optional -- ... or k of every structural spring [N/m] (one of the two)
-    shear_stiffness : float, optional -- k of every shear spring [N/m], with ``stretch_stiffness``
-        only; default half of it (the isotropic ratio on square cells)
-    bend_stiffness : float -- k of every bend spring [N/m], >= 0; 0 (default) adds none. A spring
-        across a straight run of the sheet resists a fold only to second order in the fold's angle
-        (no linear bending stiffness D), so this is a spring constant, not a plate's E t^3 / 12 (1 - nu^2)
-    damping : float -- damper of every spring k_d [N s/m], >= 0
+    areal_density : float, optional
+        mass per area [kg/m^2] ...
+    mass : float, optional
+        ... or the total mass [kg] (one of the two)
+    membrane_stiffness : float, optional
+        E t [N/m], the rule above ...
+    stretch_stiffness : float, optional
+        ... or k of every structural spring [N/m] (one of the two)
+    shear_stiffness : float, optional
+        k of every shear spring [N/m], with ``stretch_stiffness`` only; default half of it (the isotropic ratio on
+        square cells)
+    bend_stiffness : float
+        k of every bend spring [N/m], >= 0; 0 (default) adds none. A spring across a straight run of the sheet resists a
+        fold only to second order in the fold's angle (no linear bending stiffness D), so this is a spring constant, not
+        a plate's E t^3 / 12 (1 - nu^2)
+    damping : float
+        damper of every spring k_d [N s/m], >= 0
 
     Returns
     -------
-    Model -- springs of kinds structural, shear and bend (:func:`cloth_springs`)
+    Model
+        springs of kinds structural, shear and bend (:func:`cloth_springs`)
 
     Examples
     --------
@@ -442,19 +486,28 @@ def cloth_mesh(points, triangles, *, areal_density=None, mass=None, membrane_sti
 
     Parameters
     ----------
-    points : (n, 3) float -- rest positions [m]
-    triangles : (m, 3) int -- node indices; every node in a triangle, every edge in at most two
-    areal_density : float, optional -- mass per area [kg/m^2] ...
-    mass : float, optional -- ... or the total mass [kg] (one of the two)
-    membrane_stiffness : float, optional -- E t [N/m], the rule above ...
-    stretch_stiffness : float, optional -- ... or k of every structural spring [N/m] (one of the two)
-    bend_stiffness : float -- k of every bend spring [N/m], >= 0; 0 (default) adds none (see
-        :func:`cloth_grid` for what a bend spring does and does not model)
-    damping : float -- damper of every spring k_d [N s/m], >= 0
+    points : (n, 3) float
+        rest positions [m]
+    triangles : (m, 3) int
+        node indices; every node in a triangle, every edge in at most two
+    areal_density : float, optional
+        mass per area [kg/m^2] ...
+    mass : float, optional
+        ... or the total mass [kg] (one of the two)
+    membrane_stiffness : float, optional
+        E t [N/m], the rule above ...
+    stretch_stiffness : float, optional
+        ... or k of every structural spring [N/m] (one of the two)
+    bend_stiffness : float
+        k of every bend spring [N/m], >= 0; 0 (default) adds none (see :func:`cloth_grid` for what a bend spring does
+        and does not model)
+    damping : float
+        damper of every spring k_d [N s/m], >= 0
 
     Returns
     -------
-    Model -- springs of kinds structural and bend (:func:`cloth_springs`)
+    Model
+        springs of kinds structural and bend (:func:`cloth_springs`)
 
     Raises
     ------
@@ -546,14 +599,19 @@ def cloth_strain_limit(model, tau=0.1, *, kinds=("structural", "shear"), iterati
 
     Parameters
     ----------
-    model : Model -- from :func:`cloth_grid` or :func:`cloth_mesh`
-    tau : float -- largest stretch (l - l0) / l0 [-], > 0 (Provot: 0.1)
-    kinds : sequence of str -- spring kinds limited (default structural and shear, as Provot did;
-        bend springs follow from them)
-    iterations : int -- Gauss-Seidel sweeps per step, >= 1; the correction at a pinned corner reaches
-        about one spring further per sweep, so large fine sheets need more sweeps, or ``tolerance``
-    tolerance : float -- stop sweeping once no spring exceeds its bound by more than this [-]
-    compression : float, optional -- also keep springs above (1 - compression) l0
+    model : Model
+        from :func:`cloth_grid` or :func:`cloth_mesh`
+    tau : float
+        largest stretch (l - l0) / l0 [-], > 0 (Provot: 0.1)
+    kinds : sequence of str
+        spring kinds limited (default structural and shear, as Provot did; bend springs follow from them)
+    iterations : int
+        Gauss-Seidel sweeps per step, >= 1; the correction at a pinned corner reaches about one spring further per
+        sweep, so large fine sheets need more sweeps, or ``tolerance``
+    tolerance : float
+        stop sweeping once no spring exceeds its bound by more than this [-]
+    compression : float, optional
+        also keep springs above (1 - compression) l0
 
     Returns
     -------
@@ -633,12 +691,13 @@ def combine(models) -> Model:
 
     Parameters
     ----------
-    models : sequence of Model -- at least one
+    models : sequence of Model
+        at least one
 
     Returns
     -------
-    Model -- ``node_body``, ``materials`` and ``body_names`` joined; ``rule`` and ``rung`` the common
-    ones, or "mixed"
+    Model
+        ``node_body``, ``materials`` and ``body_names`` joined; ``rule`` and ``rung`` the common ones, or "mixed"
 
     Raises
     ------

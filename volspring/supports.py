@@ -182,11 +182,14 @@ class Prescribed(_NodeSupport):
 
     Parameters
     ----------
-    nodes : (p,) int or (n,) bool -- as for :class:`Pins`
-    components : str or sequence of int -- the held components, e.g. ``"x"``, ``"xz"``, ``(0, 2)``
-    motion : callable, optional -- ``motion(t) -> (p, 3)`` positions [m]; only the held
-        components are used (the others are free)
-    velocity : callable, optional -- ``velocity(t) -> (p, 3)`` [m/s], only with ``motion``
+    nodes : (p,) int or (n,) bool
+        as for :class:`Pins`
+    components : str or sequence of int
+        the held components, e.g. ``"x"``, ``"xz"``, ``(0, 2)``
+    motion : callable, optional
+        ``motion(t) -> (p, 3)`` positions [m]; only the held components are used (the others are free)
+    velocity : callable, optional
+        ``velocity(t) -> (p, 3)`` [m/s], only with ``motion``
 
     Examples
     --------
@@ -224,8 +227,10 @@ class Sliding(_NodeSupport):
 
     Parameters
     ----------
-    nodes : (p,) int or (n,) bool -- as for :class:`Pins`
-    normal : {"x", "y", "z"} or {0, 1, 2} -- the axis normal to the plane (the held component)
+    nodes : (p,) int or (n,) bool
+        as for :class:`Pins`
+    normal : {"x", "y", "z"} or {0, 1, 2}
+        the axis normal to the plane (the held component)
 
     Examples
     --------

@@ -124,20 +124,27 @@ def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULE
 
     Parameters
     ----------
-    cases : sequence of str, optional -- built-in case, held-out case and study names (``BUILT_IN``,
-        ``HELDOUT`` and ``STUDIES``); default all of them (the held-out shapes not with ``quick``), or none
-        when ``own_case`` is given
-    quick : bool -- coarse meshes and short runs (about half a minute in all)
-    own_case : Case, optional -- a user's mesh (:func:`validation.cases.own_mesh_case`)
-    rules : sequence of str -- spring stiffness rules
-    models : sequence of str -- rungs of the ladder (:data:`volspring.ladder.MODELS`), at least one
-    folder : path, optional -- FEM cache folder
-    progress : callable, optional -- ``progress(fraction, message)``, fraction in [0, 1]
+    cases : sequence of str, optional
+        built-in case, held-out case and study names (``BUILT_IN``, ``HELDOUT`` and ``STUDIES``); default all of them
+        (the held-out shapes not with ``quick``), or none when ``own_case`` is given
+    quick : bool
+        coarse meshes and short runs (about half a minute in all)
+    own_case : Case, optional
+        a user's mesh (:func:`validation.cases.own_mesh_case`)
+    rules : sequence of str
+        spring stiffness rules
+    models : sequence of str
+        rungs of the ladder (:data:`volspring.ladder.MODELS`), at least one
+    folder : path, optional
+        FEM cache folder
+    progress : callable, optional
+        ``progress(fraction, message)``, fraction in [0, 1]
 
     Returns
     -------
-    (results, artefacts) -- results: JSON-ready dict (module docstring); artefacts: the
-    :class:`~validation.compare.Comparison` of each case, for VTU files
+    (results, artefacts)
+        results: JSON-ready dict (module docstring); artefacts: the :class:`~validation.compare.Comparison` of each
+        case, for VTU files
     """
     known = BUILT_IN + HELDOUT + STUDIES
     if cases is None or len(cases) == 0:

@@ -27,9 +27,10 @@ class CollisionBodies:
 
     Parameters
     ----------
-    meshes : sequence of TetMesh -- the bodies, in body-id order
-    model_nodes : (N,) int, optional -- the model node of each global node id (:meth:`from_model`);
-        default ``arange(N)``
+    meshes : sequence of TetMesh
+        the bodies, in body-id order
+    model_nodes : (N,) int, optional
+        the model node of each global node id (:meth:`from_model`); default ``arange(N)``
 
     Examples
     --------

@@ -119,25 +119,34 @@ class ContactForce(_PenaltyResponse):
 
     Parameters
     ----------
-    model : Model -- the bodies (:meth:`Model.from_bodies <volspring.Model.from_bodies>`); a model
-        built from one mesh is one body (useful with ``self_collision=True``). The deprecated
-        ``MultiBodyModel`` of ``assemble_bodies`` is taken for its ``.model``.
-    stiffness : float, optional -- k_c [N/m] for every contact, instead of the material rule
-    stiffness_factor : float -- alpha of ``k_c = alpha E_eff l`` (:mod:`volspring.collision.penalty`)
-    damping_ratio : float, optional -- zeta of ``c_n = 2 zeta sqrt(k_c m)``; default 0.5
-    damping : float, optional -- c_n [N s/m] for every contact, instead of ``damping_ratio``
-    friction : float -- Coulomb coefficient mu [-], 0 for frictionless contact
-    friction_velocity : float -- regularisation eps [m/s] of the friction
-    self_collision : bool -- also collide each body with itself
-    method : {"consistent", "closest_surface"} -- penetration depths (Heidelberger et al. 2004, or
-        the naive nearest surface point, kept for comparison)
-    cell_size : float, optional -- hash cell [m]; default the mean rest edge length
-    edges : bool -- also push apart bodies that cross with no vertex inside the other (two thin
-        slabs crossing like an X): intersecting tet pairs from
-        :func:`~volspring.collision.tet_tet.crossing_tet_pairs`, then a contact per boundary edge
-        through a boundary face (:func:`~volspring.collision.tet_tet.edge_crossing_contacts`), with
-        the same force law and Jacobian. Off by default: it costs 2.5x the vertex detection at 8,748
-        tets and 8x at 768 (``benchmarks/bench_collision.py`` prints the ratio)
+    model : Model
+        the bodies (:meth:`Model.from_bodies <volspring.Model.from_bodies>`); a model built from one mesh is one body
+        (useful with ``self_collision=True``). The deprecated ``MultiBodyModel`` of ``assemble_bodies`` is taken for its
+        ``.model``.
+    stiffness : float, optional
+        k_c [N/m] for every contact, instead of the material rule
+    stiffness_factor : float
+        alpha of ``k_c = alpha E_eff l`` (:mod:`volspring.collision.penalty`)
+    damping_ratio : float, optional
+        zeta of ``c_n = 2 zeta sqrt(k_c m)``; default 0.5
+    damping : float, optional
+        c_n [N s/m] for every contact, instead of ``damping_ratio``
+    friction : float
+        Coulomb coefficient mu [-], 0 for frictionless contact
+    friction_velocity : float
+        regularisation eps [m/s] of the friction
+    self_collision : bool
+        also collide each body with itself
+    method : {"consistent", "closest_surface"}
+        penetration depths (Heidelberger et al. 2004, or the naive nearest surface point, kept for comparison)
+    cell_size : float, optional
+        hash cell [m]; default the mean rest edge length
+    edges : bool
+        also push apart bodies that cross with no vertex inside the other (two thin slabs crossing like an X):
+        intersecting tet pairs from :func:`~volspring.collision.tet_tet.crossing_tet_pairs`, then a contact per boundary
+        edge through a boundary face (:func:`~volspring.collision.tet_tet.edge_crossing_contacts`), with the same force
+        law and Jacobian. Off by default: it costs 2.5x the vertex detection at 8,748 tets and 8x at 768
+        (``benchmarks/bench_collision.py`` prints the ratio)
 
     Examples
     --------
@@ -247,16 +256,18 @@ class ObstacleContactForce(_PenaltyResponse):
 
     Parameters
     ----------
-    model : Model -- one body or many (E and the edge length of each node's body)
+    model : Model
+        one body or many (E and the edge length of each node's body)
     obstacles : sequence of HalfSpace or StaticTriangleMesh
-    nodes : (k,) int, optional -- the model nodes that can touch the obstacles; default all
-    thickness : float -- contact layer over the obstacles' surfaces [m], >= 0: a node closer than this
-        to a surface is in contact, with depth ``thickness - distance`` (the half-thickness of a cloth,
-        the radius of a string or a hair, whose nodes have no volume of their own); 0 (default):
-        contact only inside
-    stiffness, stiffness_factor, damping_ratio, damping, friction, friction_velocity -- as for
-        :class:`ContactForce`; a model without a material (a cloth, a string: built from arrays)
-        needs ``stiffness``
+    nodes : (k,) int, optional
+        the model nodes that can touch the obstacles; default all
+    thickness : float
+        contact layer over the obstacles' surfaces [m], >= 0: a node closer than this to a surface is in contact, with
+        depth ``thickness - distance`` (the half-thickness of a cloth, the radius of a string or a hair, whose nodes
+        have no volume of their own); 0 (default): contact only inside
+    stiffness, stiffness_factor, damping_ratio, damping, friction, friction_velocity
+        as for :class:`ContactForce`; a model without a material (a cloth, a string: built from arrays) needs
+        ``stiffness``
 
     Examples
     --------

@@ -39,16 +39,26 @@ class MultiBodyModel:
 
     Attributes
     ----------
-    model : Model -- all bodies (``Model.from_bodies``): everything below is derived from it
-    collision_bodies : CollisionBodies -- the placed tet meshes, one body each
-    collision_nodes : (N,) int64 -- model node of each collision global node id
-    mesh_nodes : tuple of (n_b,) int64 -- model nodes of each body's mesh nodes, in mesh order
-    shell_nodes : tuple of (s_b,) int64 -- model nodes of each body's shell nodes
-    node_body : (n,) int64 -- body of every model node, shell nodes included
-    initial_velocities : (n, 3) float -- the bodies' initial velocities at every node [m/s]
-    youngs_modulus : (b,) float -- E of each body [Pa]
-    edge_length : (b,) float -- mean rest tet-edge length of each body [m]
-    bodies : tuple of Body -- what was assembled
+    model : Model
+        all bodies (``Model.from_bodies``): everything below is derived from it
+    collision_bodies : CollisionBodies
+        the placed tet meshes, one body each
+    collision_nodes : (N,) int64
+        model node of each collision global node id
+    mesh_nodes : tuple of (n_b,) int64
+        model nodes of each body's mesh nodes, in mesh order
+    shell_nodes : tuple of (s_b,) int64
+        model nodes of each body's shell nodes
+    node_body : (n,) int64
+        body of every model node, shell nodes included
+    initial_velocities : (n, 3) float
+        the bodies' initial velocities at every node [m/s]
+    youngs_modulus : (b,) float
+        E of each body [Pa]
+    edge_length : (b,) float
+        mean rest tet-edge length of each body [m]
+    bodies : tuple of Body
+        what was assembled
     """
 
     model: Model
@@ -105,7 +115,8 @@ def assemble_bodies(bodies) -> MultiBodyModel:
 
     Returns
     -------
-    MultiBodyModel -- wrapping ``Model.from_bodies(bodies)``
+    MultiBodyModel
+        wrapping ``Model.from_bodies(bodies)``
     """
     warn_deprecated(f"{__name__}.assemble_bodies",
                     "volspring.Model.from_bodies(bodies) (initial velocities: volspring.bodies.initial_velocities)")

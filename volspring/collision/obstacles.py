@@ -56,10 +56,14 @@ class HalfSpace:
 
     Parameters
     ----------
-    point : (3,) float -- a point on the plane [m]
-    normal : (3,) float -- outward normal, pointing into the free side [-], normalised here
-    restitution : float -- e in [0, 1] (keyword-only)
-    friction : float -- Coulomb coefficient mu >= 0 (keyword-only)
+    point : (3,) float
+        a point on the plane [m]
+    normal : (3,) float
+        outward normal, pointing into the free side [-], normalised here
+    restitution : float
+        e in [0, 1] (keyword-only)
+    friction : float
+        Coulomb coefficient mu >= 0 (keyword-only)
 
     Examples
     --------
@@ -106,11 +110,16 @@ class HalfSpace:
 
         Returns
         -------
-        vertex : (k,) int -- indices of the points below ``thickness`` above the plane
-        depth : (k,) float -- how far below that level [m]: ``thickness - height``
-        direction : (k, 3) float -- the way out (the normal)
-        closest : (k, 3) float -- nearest points on the plane [m]
-        face : (k,) int -- -1 (a plane has no faces)
+        vertex : (k,) int
+            indices of the points below ``thickness`` above the plane
+        depth : (k,) float
+            how far below that level [m]: ``thickness - height``
+        direction : (k, 3) float
+            the way out (the normal)
+        closest : (k, 3) float
+            nearest points on the plane [m]
+        face : (k,) int
+            -1 (a plane has no faces)
         """
         points = np.asarray(points, dtype=np.float64)
         height = self.signed_distances(points)
@@ -159,11 +168,13 @@ class StaticTriangleMesh:
 
     Parameters
     ----------
-    vertices : (v, 3) float -- corner positions [m]
-    faces : (f, 3) int -- triangles; a closed mesh is re-wound outward if it comes inward
-    band : float, optional -- for an open mesh, how far below its surface (on the side opposite the
-        faces' right-hand normals) a vertex still counts as penetrating [m]; required for open
-        meshes (a ramp has no inside), ignored for closed ones
+    vertices : (v, 3) float
+        corner positions [m]
+    faces : (f, 3) int
+        triangles; a closed mesh is re-wound outward if it comes inward
+    band : float, optional
+        for an open mesh, how far below its surface (on the side opposite the faces' right-hand normals) a vertex still
+        counts as penetrating [m]; required for open meshes (a ramp has no inside), ignored for closed ones
 
     Notes
     -----
@@ -318,14 +329,19 @@ class ObstacleContacts:
 
     Attributes
     ----------
-    vertex : (k,) int64 -- global node id
-    obstacle : (k,) int64 -- index of the obstacle in the list given to :func:`obstacle_contacts`
-    depth : (k,) float -- depth in the contact layer [m], > 0: the distance to the surface inside, plus the
-        thickness; the thickness minus the distance outside
-    direction : (k, 3) float -- unit direction that takes the vertex out (towards ``closest`` from inside, away
-        from it outside)
-    closest : (k, 3) float -- nearest surface point, a natural anchor for friction [m]
-    face : (k,) int64 -- triangle of ``closest``; -1 for a half-space
+    vertex : (k,) int64
+        global node id
+    obstacle : (k,) int64
+        index of the obstacle in the list given to :func:`obstacle_contacts`
+    depth : (k,) float
+        depth in the contact layer [m], > 0: the distance to the surface inside, plus the thickness; the thickness minus
+        the distance outside
+    direction : (k, 3) float
+        unit direction that takes the vertex out (towards ``closest`` from inside, away from it outside)
+    closest : (k, 3) float
+        nearest surface point, a natural anchor for friction [m]
+    face : (k,) int64
+        triangle of ``closest``; -1 for a half-space
     """
 
     vertex: np.ndarray
@@ -346,13 +362,16 @@ def obstacle_contacts(obstacles, positions, *, thickness=0.0) -> ObstacleContact
     Parameters
     ----------
     obstacles : sequence of HalfSpace or StaticTriangleMesh
-    positions : (N, 3) float -- current node positions of all bodies, stacked [m]
-    thickness : float -- contact layer over each obstacle's surface [m], >= 0: the half-thickness of
-        a cloth or a string's radius (0: contact only inside)
+    positions : (N, 3) float
+        current node positions of all bodies, stacked [m]
+    thickness : float
+        contact layer over each obstacle's surface [m], >= 0: the half-thickness of a cloth or a string's radius (0:
+        contact only inside)
 
     Returns
     -------
-    ObstacleContacts -- sorted by obstacle, then vertex
+    ObstacleContacts
+        sorted by obstacle, then vertex
 
     Examples
     --------

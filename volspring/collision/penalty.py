@@ -79,14 +79,20 @@ class PenaltyContacts:
 
     Attributes
     ----------
-    nodes : (c, m) int64 -- the penetrating vertex, then the nodes that carry the reaction
-        (m = 5 between bodies, 1 against an obstacle)
-    weights : (c, m) float -- 1, then minus the barycentric weights
-    depth : (c,) float -- penetration depth, clamped at 0 [m]
-    direction : (c, 3) float -- unit direction out of the other side
-    stiffness : (c,) float -- k_c [N/m]
-    damping : (c,) float -- c_n [N s/m]
-    other : (c,) int64 -- the body (``ContactForce``) or obstacle (``ObstacleContactForce``) penetrated
+    nodes : (c, m) int64
+        the penetrating vertex, then the nodes that carry the reaction (m = 5 between bodies, 1 against an obstacle)
+    weights : (c, m) float
+        1, then minus the barycentric weights
+    depth : (c,) float
+        penetration depth, clamped at 0 [m]
+    direction : (c, 3) float
+        unit direction out of the other side
+    stiffness : (c,) float
+        k_c [N/m]
+    damping : (c,) float
+        c_n [N s/m]
+    other : (c,) int64
+        the body (``ContactForce``) or obstacle (``ObstacleContactForce``) penetrated
     """
 
     nodes: np.ndarray

@@ -57,22 +57,35 @@ class PenetrationDepths:
 
     Attributes
     ----------
-    vertex : (c,) int64 -- global id of the penetrating vertex (sorted, then by ``other_body``)
-    vertex_body : (c,) int64 -- its body
-    other_body : (c,) int64 -- the body it is inside
-    tet : (c,) int64 -- one tet of ``other_body`` containing the vertex (global id)
-    barycentric : (c, 4) float -- the vertex's weights on that tet's nodes: the reaction on ``other_body``
-    depth : (c,) float -- penetration depth [m]; may come out slightly negative for a vertex that is
-        barely inside where interpolated normals disagree: clamp at 0 in a penalty force
-    direction : (c, 3) float -- unit direction that takes the vertex out of ``other_body``
-    level : (c,) int64 -- 0 for border points, ``j`` for the ``j``-th propagation level, -1 for
-        points whose depth came from the closest surface point
-    fallback : (c,) bool -- depth from the closest surface point because no border point reached the
-        vertex (e.g. a body wholly inside another); always False for the naive method
-    hit_owner : (h,) int64 -- row of the border point owning each intersection edge
-    hit_point : (h, 3) float -- where that edge crosses ``other_body``'s surface [m]
-    hit_normal : (h, 3) float -- interpolated unit normal of ``other_body`` there
-    method : str -- ``"consistent"`` or ``"closest_surface"``
+    vertex : (c,) int64
+        global id of the penetrating vertex (sorted, then by ``other_body``)
+    vertex_body : (c,) int64
+        its body
+    other_body : (c,) int64
+        the body it is inside
+    tet : (c,) int64
+        one tet of ``other_body`` containing the vertex (global id)
+    barycentric : (c, 4) float
+        the vertex's weights on that tet's nodes: the reaction on ``other_body``
+    depth : (c,) float
+        penetration depth [m]; may come out slightly negative for a vertex that is barely inside where interpolated
+        normals disagree: clamp at 0 in a penalty force
+    direction : (c, 3) float
+        unit direction that takes the vertex out of ``other_body``
+    level : (c,) int64
+        0 for border points, ``j`` for the ``j``-th propagation level, -1 for points whose depth came from the closest
+        surface point
+    fallback : (c,) bool
+        depth from the closest surface point because no border point reached the vertex (e.g. a body wholly inside
+        another); always False for the naive method
+    hit_owner : (h,) int64
+        row of the border point owning each intersection edge
+    hit_point : (h, 3) float
+        where that edge crosses ``other_body``'s surface [m]
+    hit_normal : (h, 3) float
+        interpolated unit normal of ``other_body`` there
+    method : str
+        ``"consistent"`` or ``"closest_surface"``
     """
 
     vertex: np.ndarray
@@ -149,12 +162,15 @@ def closest_surface_depths(bodies: CollisionBodies, positions, contacts: VertexT
     Parameters
     ----------
     bodies : CollisionBodies
-    positions : (N, 3) float or sequence of (n_b, 3) float -- current positions [m]
-    contacts : VertexTetContacts -- from :func:`detect_collisions` at these positions
+    positions : (N, 3) float or sequence of (n_b, 3) float
+        current positions [m]
+    contacts : VertexTetContacts
+        from :func:`detect_collisions` at these positions
 
     Returns
     -------
-    PenetrationDepths -- with ``method = "closest_surface"``, ``level = -1``, ``fallback`` all False
+    PenetrationDepths
+        with ``method = "closest_surface"``, ``level = -1``, ``fallback`` all False
     """
     x = bodies.stack_positions(positions)
     _, vertex, other, tet, bary = _colliding_points(bodies, contacts)
@@ -208,15 +224,19 @@ def consistent_penetration_depths(bodies: CollisionBodies, positions, contacts: 
     Parameters
     ----------
     bodies : CollisionBodies
-    positions : (N, 3) float or sequence of (n_b, 3) float -- current positions [m]
-    contacts : VertexTetContacts -- from :func:`detect_collisions` at these positions
-    cell_size : float, optional -- hash cell for the edge-triangle search [m]; default mean rest edge length
-    table_size : int -- hash buckets of that search
+    positions : (N, 3) float or sequence of (n_b, 3) float
+        current positions [m]
+    contacts : VertexTetContacts
+        from :func:`detect_collisions` at these positions
+    cell_size : float, optional
+        hash cell for the edge-triangle search [m]; default mean rest edge length
+    table_size : int
+        hash buckets of that search
 
     Returns
     -------
-    PenetrationDepths -- with ``method = "consistent"``; see the module docstring for the phases
-    and the flagged fallback
+    PenetrationDepths
+        with ``method = "consistent"``; see the module docstring for the phases and the flagged fallback
 
     Examples
     --------

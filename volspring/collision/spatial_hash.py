@@ -34,13 +34,16 @@ def cell_hash(cells, table_size=DEFAULT_TABLE_SIZE) -> np.ndarray:
 
     Parameters
     ----------
-    cells : (k, 3) int64 -- cell coordinates ``floor(x / cell_size)``
-    table_size : int -- number of hash buckets, ``1 <= table_size <= 2**31 - 1``
+    cells : (k, 3) int64
+        cell coordinates ``floor(x / cell_size)``
+    table_size : int
+        number of hash buckets, ``1 <= table_size <= 2**31 - 1``
 
     Returns
     -------
-    (k,) int64 -- hashes in ``[0, table_size)``; products wrap in int64 (still deterministic) and
-    ``np.mod`` with a positive divisor never returns a negative value.
+    (k,) int64
+        hashes in ``[0, table_size)``; products wrap in int64 (still deterministic) and ``np.mod`` with a positive
+        divisor never returns a negative value.
     """
     cells = np.asarray(cells, dtype=np.int64)
     mixed = (cells[:, 0] * HASH_PRIMES[0]) ^ (cells[:, 1] * HASH_PRIMES[1]) ^ (cells[:, 2] * HASH_PRIMES[2])
@@ -129,14 +132,18 @@ class SpatialHash:
 
         Parameters
         ----------
-        query_lo, query_hi : (q, 3) float -- query boxes [m]
-        query_group : (q,) int, optional -- group of each query (default 0)
-        rule : {"all", "other", "same"} -- which items a query may pair with: any, only those of
-            another group (e.g. another body), or only those of its own group
+        query_lo, query_hi : (q, 3) float
+            query boxes [m]
+        query_group : (q,) int, optional
+            group of each query (default 0)
+        rule : {"all", "other", "same"}
+            which items a query may pair with: any, only those of another group (e.g. another body), or only those of
+            its own group
 
         Returns
         -------
-        (query, item) : two (p,) int64 arrays, each overlapping pair exactly once, in no set order
+        (query, item) : two (p,) int64 arrays
+            each overlapping pair exactly once, in no set order
         """
         if rule not in _GROUP_RULES:
             raise ValueError(f"rule = {rule!r} is not one of {_GROUP_RULES}")
@@ -182,12 +189,15 @@ class VertexTetContacts:
 
     Attributes
     ----------
-    vertex : (k,) int64 -- the penetrating vertex
-    tet : (k,) int64 -- the tet it is inside
-    barycentric : (k, 4) float -- weights of the tet's four nodes at the vertex (sum 1, all
-        >= -meshing.tolerances.ON_SURFACE, the slack for a vertex on a face): the response distributes
-        the reaction on the tet's nodes with them
-    vertex_body, tet_body : (k,) int64 -- body ids (equal only for self-collisions)
+    vertex : (k,) int64
+        the penetrating vertex
+    tet : (k,) int64
+        the tet it is inside
+    barycentric : (k, 4) float
+        weights of the tet's four nodes at the vertex (sum 1, all >= -meshing.tolerances.ON_SURFACE, the slack for a
+        vertex on a face): the response distributes the reaction on the tet's nodes with them
+    vertex_body, tet_body : (k,) int64
+        body ids (equal only for self-collisions)
     """
 
     vertex: np.ndarray
@@ -217,13 +227,18 @@ def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, tab
 
     Parameters
     ----------
-    bodies : CollisionBodies -- the topology of every deformable body
-    positions : (N, 3) float or sequence of (n_b, 3) float -- current node positions [m]
-    cell_size : float, optional -- grid cell edge [m]; default the mean rest edge length
-    table_size : int -- hash buckets; smaller only adds candidates, never changes the result
-    self_collision : bool -- also report a vertex inside a non-incident tet of its own body.
-        Off by default: pairs within a body are then never generated (nor is a tet whose box
-        misses every other body), so a scene without self-collision does not pay for it.
+    bodies : CollisionBodies
+        the topology of every deformable body
+    positions : (N, 3) float or sequence of (n_b, 3) float
+        current node positions [m]
+    cell_size : float, optional
+        grid cell edge [m]; default the mean rest edge length
+    table_size : int
+        hash buckets; smaller only adds candidates, never changes the result
+    self_collision : bool
+        also report a vertex inside a non-incident tet of its own body. Off by default: pairs within a body are then
+        never generated (nor is a tet whose box misses every other body), so a scene without self-collision does not pay
+        for it.
 
     Returns
     -------

@@ -251,15 +251,20 @@ class EdgeFaceCrossings:
 
     Attributes
     ----------
-    pair : (k,) int64 -- the pair (row of ``a`` and ``b``)
-    edge_in_b : (k,) bool -- True: an edge of ``b`` through a face of ``a``; False: an edge of ``a``
-        through a face of ``b``
-    edge : (k,) int64 -- the crossing edge, a row of ``meshing.mesh.TET_EDGES`` (local corners)
-    face : (k,) int64 -- the face crossed, a row of ``meshing.mesh.TET_FACES`` (the face opposite
-        corner ``face``)
-    t : (k,) float -- where along the edge, 0 at ``TET_EDGES[edge, 0]``, 1 at the other end
-    barycentric : (k, 3) float -- weights of the face's corners ``TET_FACES[face]`` there (>= 0, sum 1)
-    point : (k, 3) float -- the crossing point [m]: the closest points of edge and face coincide there
+    pair : (k,) int64
+        the pair (row of ``a`` and ``b``)
+    edge_in_b : (k,) bool
+        True: an edge of ``b`` through a face of ``a``; False: an edge of ``a`` through a face of ``b``
+    edge : (k,) int64
+        the crossing edge, a row of ``meshing.mesh.TET_EDGES`` (local corners)
+    face : (k,) int64
+        the face crossed, a row of ``meshing.mesh.TET_FACES`` (the face opposite corner ``face``)
+    t : (k,) float
+        where along the edge, 0 at ``TET_EDGES[edge, 0]``, 1 at the other end
+    barycentric : (k, 3) float
+        weights of the face's corners ``TET_FACES[face]`` there (>= 0, sum 1)
+    point : (k, 3) float
+        the crossing point [m]: the closest points of edge and face coincide there
     """
 
     pair: np.ndarray
@@ -288,7 +293,8 @@ def edge_face_crossings(a, b) -> EdgeFaceCrossings:
 
     Returns
     -------
-    EdgeFaceCrossings -- sorted by pair, then a's edges before b's, then edge, then face
+    EdgeFaceCrossings
+        sorted by pair, then a's edges before b's, then edge, then face
 
     Examples
     --------
@@ -353,10 +359,13 @@ class TetPairs:
 
     Attributes
     ----------
-    tet_a, tet_b : (k,) int64 -- global tet ids, ``tet_a < tet_b``, sorted by (tet_a, tet_b)
-    body_a, body_b : (k,) int64 -- their bodies
-    vertex_inside : (k,) bool -- a vertex of one tet lies in the other; False where they meet only by
-        edges crossing faces, the pairs :func:`~volspring.collision.detect_collisions` misses
+    tet_a, tet_b : (k,) int64
+        global tet ids, ``tet_a < tet_b``, sorted by (tet_a, tet_b)
+    body_a, body_b : (k,) int64
+        their bodies
+    vertex_inside : (k,) bool
+        a vertex of one tet lies in the other; False where they meet only by edges crossing faces, the pairs
+        :func:`~volspring.collision.detect_collisions` misses
     """
 
     tet_a: np.ndarray
@@ -377,14 +386,18 @@ def crossing_tet_pairs(bodies, positions, *, cell_size=None, table_size=None, se
     Parameters
     ----------
     bodies : CollisionBodies
-    positions : (N, 3) float or sequence of (n_b, 3) float -- current node positions [m]
-    cell_size : float, optional -- hash cell [m]; default the mean rest edge length
-    table_size : int, optional -- hash buckets (default that of the vertex-in-tet detection)
-    self_collision : bool -- also pairs of one body's tets that share no node
-    boundary : bool -- only the pairs that can hold a boundary edge of one tet crossing a boundary face of
-        the other (``bodies.tet_edge_on_boundary``, ``bodies.tet_face_on_boundary``): all that
-        :func:`edge_crossing_contacts` uses, so it gives the same contacts from them, at a fraction of the
-        cost (interior tets never enter the hash)
+    positions : (N, 3) float or sequence of (n_b, 3) float
+        current node positions [m]
+    cell_size : float, optional
+        hash cell [m]; default the mean rest edge length
+    table_size : int, optional
+        hash buckets (default that of the vertex-in-tet detection)
+    self_collision : bool
+        also pairs of one body's tets that share no node
+    boundary : bool
+        only the pairs that can hold a boundary edge of one tet crossing a boundary face of the other
+        (``bodies.tet_edge_on_boundary``, ``bodies.tet_face_on_boundary``): all that :func:`edge_crossing_contacts`
+        uses, so it gives the same contacts from them, at a fraction of the cost (interior tets never enter the hash)
 
     Returns
     -------
@@ -467,12 +480,17 @@ class EdgeCrossingContacts:
 
     Attributes
     ----------
-    vertex : (c,) int64 -- the edge's end behind the face (global id); ``other_end`` the edge's other end
+    vertex : (c,) int64
+        the edge's end behind the face (global id); ``other_end`` the edge's other end
     other_end : (c,) int64
-    face : (c, 3) int64 -- the face's nodes, wound outward (global ids)
-    barycentric : (c, 3) float -- weights of ``face``'s nodes at the crossing point (>= 0, sum 1)
-    depth : (c,) float -- distance of ``vertex`` behind the face's plane [m], >= 0
-    direction : (c, 3) float -- the face's outward unit normal
+    face : (c, 3) int64
+        the face's nodes, wound outward (global ids)
+    barycentric : (c, 3) float
+        weights of ``face``'s nodes at the crossing point (>= 0, sum 1)
+    depth : (c,) float
+        distance of ``vertex`` behind the face's plane [m], >= 0
+    direction : (c, 3) float
+        the face's outward unit normal
     vertex_body, face_body : (c,) int64
     """
 
@@ -504,10 +522,12 @@ def edge_crossing_contacts(bodies, positions, pairs: TetPairs, *, colliding=None
     Parameters
     ----------
     bodies : CollisionBodies
-    positions : (N, 3) float or sequence of (n_b, 3) float -- current node positions [m]
-    pairs : TetPairs -- from :func:`crossing_tet_pairs` at these positions
-    colliding : VertexTetContacts, optional -- vertex-in-tet contacts at these positions: an edge
-        with an end inside the other body gets no edge contact there
+    positions : (N, 3) float or sequence of (n_b, 3) float
+        current node positions [m]
+    pairs : TetPairs
+        from :func:`crossing_tet_pairs` at these positions
+    colliding : VertexTetContacts, optional
+        vertex-in-tet contacts at these positions: an edge with an end inside the other body gets no edge contact there
 
     Returns
     -------

@@ -89,18 +89,23 @@ class ThinContactForce(_PenaltyResponse):
 
     Parameters
     ----------
-    model : Model -- tet bodies and thin bodies in one model, the tet bodies first
-        (:func:`volspring.structures.combine` of ``Model.from_bodies([...])`` and cloths or strings)
-    thickness : float -- contact layer [m], >= 0: a thin node closer than this to a tet body's
-        surface, or inside it, is in contact (module docstring)
-    nodes : (k,) int, optional -- the thin nodes; default every node of the bodies with no mesh node
-    stiffness : float, optional -- k_c [N/m] of every contact, instead of the rule
-        ``k_c = stiffness_factor 2 E l``: E of the tet body (the thin body is taken as rigid across its
-        thickness, as an obstacle is), l the mean spring length of the thin node's body
-    stiffness_factor, damping_ratio, damping, friction, friction_velocity -- as for
-        :class:`~volspring.collision.ContactForce` (the damping's mass: the node's against the
-        triangle's interpolated mass)
-    cell_size : float, optional -- hash cell [m]; default the mean tet edge length
+    model : Model
+        tet bodies and thin bodies in one model, the tet bodies first (:func:`volspring.structures.combine` of
+        ``Model.from_bodies([...])`` and cloths or strings)
+    thickness : float
+        contact layer [m], >= 0: a thin node closer than this to a tet body's surface, or inside it, is in contact
+        (module docstring)
+    nodes : (k,) int, optional
+        the thin nodes; default every node of the bodies with no mesh node
+    stiffness : float, optional
+        k_c [N/m] of every contact, instead of the rule ``k_c = stiffness_factor 2 E l``: E of the tet body (the thin
+        body is taken as rigid across its thickness, as an obstacle is), l the mean spring length of the thin node's
+        body
+    stiffness_factor, damping_ratio, damping, friction, friction_velocity
+        as for :class:`~volspring.collision.ContactForce` (the damping's mass: the node's against the triangle's
+        interpolated mass)
+    cell_size : float, optional
+        hash cell [m]; default the mean tet edge length
 
     Examples
     --------
@@ -218,16 +223,21 @@ class ClothSelfContactForce(_PenaltyResponse):
 
     Parameters
     ----------
-    model : Model -- the cloth (or a model holding it, e.g. from :func:`volspring.structures.combine`)
-    triangles : (t, 3) int -- the cloth's triangles, model node ids (:func:`volspring.structures.sheet_grid`
-        gives a grid's, shifted by the cloth's first node in a combined model)
-    thickness : float -- contact distance [m], > 0: less than the rest distance of every vertex to
-        every triangle not incident to it (checked: a flat sheet would otherwise push itself apart)
-    stiffness : float -- k_c [N/m] of every contact (a cloth has no material for a rule)
-    damping_ratio, damping, friction, friction_velocity -- as for
-        :class:`~volspring.collision.ContactForce` (the damping's mass: the vertex's against the
-        triangle's interpolated mass)
-    cell_size : float, optional -- hash cell [m]; default the mean edge length of the triangles
+    model : Model
+        the cloth (or a model holding it, e.g. from :func:`volspring.structures.combine`)
+    triangles : (t, 3) int
+        the cloth's triangles, model node ids (:func:`volspring.structures.sheet_grid` gives a grid's, shifted by the
+        cloth's first node in a combined model)
+    thickness : float
+        contact distance [m], > 0: less than the rest distance of every vertex to every triangle not incident to it
+        (checked: a flat sheet would otherwise push itself apart)
+    stiffness : float
+        k_c [N/m] of every contact (a cloth has no material for a rule)
+    damping_ratio, damping, friction, friction_velocity
+        as for :class:`~volspring.collision.ContactForce` (the damping's mass: the vertex's against the triangle's
+        interpolated mass)
+    cell_size : float, optional
+        hash cell [m]; default the mean edge length of the triangles
 
     Raises
     ------

@@ -29,16 +29,22 @@ def segment_triangle_intersections(start, end, v0, v1, v2, *, tolerance=ON_SURFA
 
     Parameters
     ----------
-    start, end : (k, 3) float -- segment end points [m]
-    v0, v1, v2 : (k, 3) float -- triangle corners [m]
-    tolerance : float -- barycentric slack for hits on triangle edges (dimensionless), so that a segment
-        through an edge or vertex shared by two triangles hits at least one despite round-off
+    start, end : (k, 3) float
+        segment end points [m]
+    v0, v1, v2 : (k, 3) float
+        triangle corners [m]
+    tolerance : float
+        barycentric slack for hits on triangle edges (dimensionless), so that a segment through an edge or vertex shared
+        by two triangles hits at least one despite round-off
 
     Returns
     -------
-    hit : (k,) bool -- the segment meets the triangle (parallel segments never hit)
-    t : (k,) float -- hit parameter along the segment, 0 at ``start``, 1 at ``end``
-    barycentric : (k, 3) float -- weights of v0, v1, v2 at the hit point
+    hit : (k,) bool
+        the segment meets the triangle (parallel segments never hit)
+    t : (k,) float
+        hit parameter along the segment, 0 at ``start``, 1 at ``end``
+    barycentric : (k, 3) float
+        weights of v0, v1, v2 at the hit point
     """
     direction = end - start
     e1, e2 = v1 - v0, v2 - v0

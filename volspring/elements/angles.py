@@ -109,11 +109,17 @@ class AngleSprings(ElementSet):
 
     Parameters
     ----------
-    node_count : int -- nodes of the model the joints belong to
-    triples : (e, 3) int -- joints (i, j, k), three different nodes each; j is the vertex
-    stiffness : (e,) float -- k [N m / rad^2], >= 0 (EI / l_j for a rod, see the module docstring)
-    rest_angles : (e,) float -- theta0 [rad] in [0, pi]; pi is straight
+    node_count : int
+        nodes of the model the joints belong to
+    triples : (e, 3) int
+        joints (i, j, k), three different nodes each; j is the vertex
+    stiffness : (e,) float
+        k [N m / rad^2], >= 0 (EI / l_j for a rod, see the module docstring)
+    rest_angles : (e,) float
+        theta0 [rad] in [0, pi]; pi is straight
 
+    Notes
+    -----
     Numbers broadcast. A ValueError names the first bad joint (nodes outside the model or
     repeated, a stiffness < 0 or a rest angle outside [0, pi]).
 
@@ -256,9 +262,12 @@ class _JointLinearization(Linearization):
 
     Parameters
     ----------
-    forces : (n, 3) float -- the joints' forces [N]
-    edge_blocks : tuple of three (3, 3, e) float -- H_aa, H_ab, H_bb [N/m], component-major
-    stiffness_scale : float -- c_K: ``blocks`` are c_K K
+    forces : (n, 3) float
+        the joints' forces [N]
+    edge_blocks : tuple of three (3, 3, e) float
+        H_aa, H_ab, H_bb [N/m], component-major
+    stiffness_scale : float
+        c_K: ``blocks`` are c_K K
     element_set : AngleSprings
     """
 
@@ -438,9 +447,12 @@ class DihedralSprings(ElementSet):
     Parameters
     ----------
     node_count : int
-    quads : (e, 4) int -- chains (h, i, j, k), four different nodes each
-    stiffness : (e,) float -- k [N m / rad^2], >= 0
-    rest_angles : (e,) float -- psi0 [rad] in [-pi, pi]
+    quads : (e, 4) int
+        chains (h, i, j, k), four different nodes each
+    stiffness : (e,) float
+        k [N m / rad^2], >= 0
+    rest_angles : (e,) float
+        psi0 [rad] in [-pi, pi]
     """
 
     node_count: int

@@ -45,10 +45,14 @@ class BlockMap:
 
     Parameters
     ----------
-    row, column : (q,) int -- positions in the stencil
-    block : (q,) int -- which of the element's ``block_count`` blocks
-    sign : (q,) float -- +1 or -1
-    block_count : int -- blocks stored per element, b
+    row, column : (q,) int
+        positions in the stencil
+    block : (q,) int
+        which of the element's ``block_count`` blocks
+    sign : (q,) float
+        +1 or -1
+    block_count : int
+        blocks stored per element, b
     """
 
     row: np.ndarray
@@ -69,10 +73,14 @@ class Linearization:
 
     Parameters
     ----------
-    forces : (n, 3) float -- the set's forces on the nodes [N]
-    blocks : (e, b, 3, 3) float -- c_K K_e + c_D C_e in the set's block layout
-    stiffness : (e, b, 3, 3) float -- K_e alone (for products with dF/dx)
-    element_set : ElementSet -- whose stencil and block map the blocks follow
+    forces : (n, 3) float
+        the set's forces on the nodes [N]
+    blocks : (e, b, 3, 3) float
+        c_K K_e + c_D C_e in the set's block layout
+    stiffness : (e, b, 3, 3) float
+        K_e alone (for products with dF/dx)
+    element_set : ElementSet
+        whose stencil and block map the blocks follow
     """
 
     def __init__(self, forces, blocks, stiffness, element_set):
@@ -92,11 +100,15 @@ class OperatorLinearization(Linearization):
 
     Parameters
     ----------
-    forces : (n, 3) float -- the set's forces [N]
-    times : callable -- ``times(u) -> K u`` for (n, 3) u [N]
-    scale : float -- c_K + c_D b: the product's factor in the system (Rayleigh damping C = b K)
+    forces : (n, 3) float
+        the set's forces [N]
+    times : callable
+        ``times(u) -> K u`` for (n, 3) u [N]
+    scale : float
+        c_K + c_D b: the product's factor in the system (Rayleigh damping C = b K)
     element_set : ElementSet
-    preconditioner : callable -- ``preconditioner() -> (e, b, 3, 3)`` stand-in blocks, already scaled
+    preconditioner : callable
+        ``preconditioner() -> (e, b, 3, 3)`` stand-in blocks, already scaled
     """
 
     def __init__(self, forces, times, scale, element_set, preconditioner):
@@ -133,9 +145,10 @@ class ElementSet(ABC):
     (and :meth:`damping_blocks` when they damp); the rest has working defaults. Element sets are
     immutable: a changed set is a new object.
 
-    Class attributes
-    ----------------
-    name : str -- a short label ("springs", "volume") for messages, files and output
+    Attributes
+    ----------
+    name : str
+        a short label ("springs", "volume") for messages, files and output
     """
 
     name: str = ""
@@ -186,11 +199,16 @@ class ElementSet(ABC):
 
         Parameters
         ----------
-        x : (n, 3) float -- positions [m]
-        v : (n, 3) float, optional -- velocities [m/s]
-        stiffness_scale : float -- c_K (h^2 [s^2] in an implicit step, 1 in statics)
-        damping_scale : float -- c_D (h [s] in an implicit step)
-        clamp_compression : bool -- see :meth:`stiffness_blocks`
+        x : (n, 3) float
+            positions [m]
+        v : (n, 3) float, optional
+            velocities [m/s]
+        stiffness_scale : float
+            c_K (h^2 [s^2] in an implicit step, 1 in statics)
+        damping_scale : float
+            c_D (h [s] in an implicit step)
+        clamp_compression : bool
+            see :meth:`stiffness_blocks`
 
         Returns
         -------

@@ -121,10 +121,14 @@ class CorotatedTets(_TetContinuum):
 
     Parameters
     ----------
-    rest_positions : (n, 3) float -- [m]
-    tets : (T, 4) int -- positively oriented tets
-    shear : float or (T,) float -- mu_t [Pa], >= 0 (the shear modulus times the tet's weight)
-    stiffness_damping : float -- Rayleigh b [s], >= 0
+    rest_positions : (n, 3) float
+        [m]
+    tets : (T, 4) int
+        positively oriented tets
+    shear : float or (T,) float
+        mu_t [Pa], >= 0 (the shear modulus times the tet's weight)
+    stiffness_damping : float
+        Rayleigh b [s], >= 0
 
     Examples
     --------
@@ -272,19 +276,26 @@ class NodalStrain(_TetContinuum):
 
     Parameters
     ----------
-    rest_positions : (n, 3) float -- [m]
-    tets : (T, 4) int -- positively oriented tets
-    shear : float or (T,) float -- mu [Pa] >= 0, per tet (a domain takes its region's value)
-    bulk : float or (T,) float -- kappa [Pa] >= 0, the volume term's coefficient, per tet
-    regions : (T,) int, optional -- material region of each tet; domains never cross regions, and
-        every tet of one region must have the same ``shear`` and ``bulk``
-    clusters : (n,) int or "pairs", optional -- a cluster label per node: each domain is then a cluster
-        of nodes and the tets around them; ``"pairs"``: the pairs of
-        :func:`~volspring.elements.tet_kinematics.pair_nodes`, whose domains a scene gives to the free
-        nodes (:meth:`supported`); default one domain per node
-    held : (n,) bool, optional -- nodes held in place: the domains are the free nodes' (a tet's volume is
-        shared among its free corners; :class:`~volspring.elements.tet_kinematics.SmoothingDomains`)
-    stiffness_damping : float -- Rayleigh b [s], >= 0
+    rest_positions : (n, 3) float
+        [m]
+    tets : (T, 4) int
+        positively oriented tets
+    shear : float or (T,) float
+        mu [Pa] >= 0, per tet (a domain takes its region's value)
+    bulk : float or (T,) float
+        kappa [Pa] >= 0, the volume term's coefficient, per tet
+    regions : (T,) int, optional
+        material region of each tet; domains never cross regions, and every tet of one region must have the same
+        ``shear`` and ``bulk``
+    clusters : (n,) int or "pairs", optional
+        a cluster label per node: each domain is then a cluster of nodes and the tets around them; ``"pairs"``: the
+        pairs of :func:`~volspring.elements.tet_kinematics.pair_nodes`, whose domains a scene gives to the free nodes
+        (:meth:`supported`); default one domain per node
+    held : (n,) bool, optional
+        nodes held in place: the domains are the free nodes' (a tet's volume is shared among its free corners;
+        :class:`~volspring.elements.tet_kinematics.SmoothingDomains`)
+    stiffness_damping : float
+        Rayleigh b [s], >= 0
 
     Examples
     --------

@@ -52,15 +52,19 @@ def springs_from_topology(topology, material, *, rule, stiffness=None, law="hook
 
     Parameters
     ----------
-    topology : SpringTopology -- a tet mesh's springs, with shells or not
+    topology : SpringTopology
+        a tet mesh's springs, with shells or not
     material : Material
-    rule, stiffness, law, damping_ratio, damping -- as for :meth:`volspring.Model.from_mesh` (checked there)
-    tet_moduli, tet_densities : (m,) float, optional -- E [Pa] and density [kg/m^3] of every mesh tet
-        instead of the material's (materials per region; shells keep ``material``)
+    rule, stiffness, law, damping_ratio, damping
+        as for :meth:`volspring.Model.from_mesh` (checked there)
+    tet_moduli, tet_densities : (m,) float, optional
+        E [Pa] and density [kg/m^3] of every mesh tet instead of the material's (materials per region; shells keep
+        ``material``)
 
     Returns
     -------
-    masses : (n,) float -- [kg]
+    masses : (n,) float
+        [kg]
     springs : Springs
     """
     mesh, n = topology.mesh, topology.node_count
@@ -131,9 +135,12 @@ def _shell_prisms(topology):
 
     Returns
     -------
-    springs : (p, 12) int -- spring index of each prism's 3 top edges, 3 straight and 6 diagonal springs
-    volumes : (p,) float -- prism volumes [m^3]
-    tops : (p, 3) int -- the prism's top-layer nodes
+    springs : (p, 12) int
+        spring index of each prism's 3 top edges, 3 straight and 6 diagonal springs
+    volumes : (p,) float
+        prism volumes [m^3]
+    tops : (p, 3) int
+        the prism's top-layer nodes
     """
     n = topology.node_count
     straight = topology.springs[topology.kinds == SPRING_KINDS.index("shell")]

@@ -38,13 +38,21 @@ class Springs(ElementSet):
 
     Parameters
     ----------
-    node_count : int -- nodes of the model the springs belong to
-    pairs : (s, 2) int -- node pairs (i, j), two different nodes each
-    stiffness : (s,) float -- effective linear stiffness k_e [N/m], >= 0
-    damping : (s,) float -- damper coefficient k_d [N s/m], >= 0
-    rest_lengths : (s,) float -- l0 [m], > 0
-    kinds : (s,) int -- index into ``SPRING_KINDS`` (what each spring models: tet edge, shell...)
+    node_count : int
+        nodes of the model the springs belong to
+    pairs : (s, 2) int
+        node pairs (i, j), two different nodes each
+    stiffness : (s,) float
+        effective linear stiffness k_e [N/m], >= 0
+    damping : (s,) float
+        damper coefficient k_d [N s/m], >= 0
+    rest_lengths : (s,) float
+        l0 [m], > 0
+    kinds : (s,) int
+        index into ``SPRING_KINDS`` (what each spring models: tet edge, shell...)
 
+    Notes
+    -----
     Numbers broadcast (``damping=0.0``). Input is checked: a TypeError for what is not numbers or
     for non-integer pairs, a ValueError for wrong shapes, values out of range and pairs outside
     the nodes or joining a node to itself, naming the first offender.
@@ -125,11 +133,16 @@ class Springs(ElementSet):
 
         Parameters
         ----------
-        x : (n, 3) float -- positions [m]
-        v : (n, 3) float, optional -- velocities [m/s]; without them the dampers exert no force
-        stiffness_scale : float -- c_K (h^2 [s^2] for an implicit step, 1 for statics)
-        damping_scale : float -- c_D (h [s] for an implicit step)
-        clamp_compression : bool -- clamp the transverse term (1 - l0/l) at 0
+        x : (n, 3) float
+            positions [m]
+        v : (n, 3) float, optional
+            velocities [m/s]; without them the dampers exert no force
+        stiffness_scale : float
+            c_K (h^2 [s^2] for an implicit step, 1 for statics)
+        damping_scale : float
+            c_D (h [s] for an implicit step)
+        clamp_compression : bool
+            clamp the transverse term (1 - l0/l) at 0
         """
         r, length = self._directions(x)
         forces = self.incidence @ (self._magnitudes(r, length, v)[:, None] * r)
@@ -149,13 +162,17 @@ class Springs(ElementSet):
 
         Parameters
         ----------
-        node_rank : (n,) int -- new index of every node
-        node_count : int, optional -- nodes in the new numbering (default n)
+        node_rank : (n,) int
+            new index of every node
+        node_count : int, optional
+            nodes in the new numbering (default n)
 
         Returns
         -------
-        springs : Springs -- in the new numbering
-        order : (s,) int -- which spring of ``self`` each new spring is
+        springs : Springs
+            in the new numbering
+        order : (s,) int
+            which spring of ``self`` each new spring is
         """
         local = node_rank[self.pairs]
         order = np.argsort(local.min(axis=1), kind="stable")
@@ -212,13 +229,18 @@ class SpringLinearization(Linearization):
 
     Attributes
     ----------
-    forces : (n, 3) float -- spring (and damper, if velocities were given) forces on the nodes [N]
-    blocks : (s, 3, 3) float -- W_e = c_K H_e + c_D D_e
-    directions : (s, 3) float -- unit vectors r_e from i to j
-    lengths : (s,) float -- current lengths [m]
-    axial : (s,) float -- k_e, coefficient of r r^T in H_e [N/m]
-    transverse : (s,) float -- k_e (1 - l0/l), clamped if asked: coefficient of the transverse
-        projector I - r r^T in H_e [N/m]
+    forces : (n, 3) float
+        spring (and damper, if velocities were given) forces on the nodes [N]
+    blocks : (s, 3, 3) float
+        W_e = c_K H_e + c_D D_e
+    directions : (s, 3) float
+        unit vectors r_e from i to j
+    lengths : (s,) float
+        current lengths [m]
+    axial : (s,) float
+        k_e, coefficient of r r^T in H_e [N/m]
+    transverse : (s,) float
+        k_e (1 - l0/l), clamped if asked: coefficient of the transverse projector I - r r^T in H_e [N/m]
     """
 
     def __init__(self, forces, blocks, stiffness, element_set, directions, lengths, axial, transverse):

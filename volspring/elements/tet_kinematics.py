@@ -36,9 +36,12 @@ class TetGradients:
 
     Parameters
     ----------
-    tets : (T, 4) int -- corner nodes
-    volumes : (T,) float -- rest volumes [m^3], > 0
-    gradients : (T, 4, 3) float -- g_ta [1/m]
+    tets : (T, 4) int
+        corner nodes
+    volumes : (T,) float
+        rest volumes [m^3], > 0
+    gradients : (T, 4, 3) float
+        g_ta [1/m]
     """
 
     tets: np.ndarray
@@ -195,14 +198,18 @@ def corotational(F, *, project=True):
     Parameters
     ----------
     F : (m, 3, 3) float
-    project : bool -- clamp the twist coefficients so that the Hessian is positive semi-definite
+    project : bool
+        clamp the twist coefficients so that the Hessian is positive semi-definite
 
     Returns
     -------
     psi : (m,) float
-    P : (m, 3, 3) float -- d psi / dF = 2 (F - R)
-    twists : (m, 3, 3, 3) float -- q_r, r = 0..2, unit 3x3 directions
-    coefficients : (m, 3) float -- c_r; the Hessian is 2 (I - sum_r c_r q_r q_r^T)
+    P : (m, 3, 3) float
+        d psi / dF = 2 (F - R)
+    twists : (m, 3, 3, 3) float
+        q_r, r = 0..2, unit 3x3 directions
+    coefficients : (m, 3) float
+        c_r; the Hessian is 2 (I - sum_r c_r q_r q_r^T)
     """
     U, s, Vt = rotation_preserving_svd(F)
     R = U @ Vt
@@ -230,28 +237,38 @@ class SmoothingDomains:
     ----------
     gradients : TetGradients
     node_count : int
-    regions : (T,) int, optional -- material region of every tet (domains never cross regions)
-    clusters : (n,) int, optional -- a cluster label per node: a domain is then a cluster of nodes (within
-        one region) and the tets around any of them, e.g. :func:`pair_nodes`; default one node per domain
-    held : (n,) bool, optional -- nodes the supports hold in place: the domains are then the free nodes'.
-        A tet's volume is shared equally among its free corners (a held corner gives nothing, and sits in
-        the domain of its tet's first free corner only to keep the arrays' shape); a tet with no free
-        corner keeps quarter shares, in domains of its own nodes that no free node is part of. Why: a
-        domain of held nodes can change its volume only through the free nodes around it, so its
-        constraint falls on them on top of their own, and a clamped end locks (``benchmarks/study_locking.py``)
+    regions : (T,) int, optional
+        material region of every tet (domains never cross regions)
+    clusters : (n,) int, optional
+        a cluster label per node: a domain is then a cluster of nodes (within one region) and the tets around any of
+        them, e.g. :func:`pair_nodes`; default one node per domain
+    held : (n,) bool, optional
+        nodes the supports hold in place: the domains are then the free nodes'. A tet's volume is shared equally among
+        its free corners (a held corner gives nothing, and sits in the domain of its tet's first free corner only to
+        keep the arrays' shape); a tet with no free corner keeps quarter shares, in domains of its own nodes that no
+        free node is part of. Why: a domain of held nodes can change its volume only through the free nodes around it,
+        so its constraint falls on them on top of their own, and a clamped end locks (``benchmarks/study_locking.py``)
 
     Attributes
     ----------
-    node : (d,) int -- the node of each domain (its cluster label with ``clusters``; past every label for the
-        domains of tets with no free corner, with ``held``)
-    region : (d,) int -- its region
-    volumes : (d,) float -- V_d [m^3]
-    ring_domain, ring_node : (r,) int -- the ring entries: domain and ring node, sorted by domain
-    ring_gradient : (r, 3) float -- gbar_da of each ring entry [1/m]
-    corner_entry : (T, 4, 4) int -- ring entry of (domain of corner c of tet t, node of corner a)
-    corner_domain : (T, 4) int -- domain of corner c of tet t
-    corner_share : (T, 4) float -- the share of tet t's volume that corner c gives its domain (1/4 each
-        unless nodes are ``held``; every row sums to 1)
+    node : (d,) int
+        the node of each domain (its cluster label with ``clusters``; past every label for the domains of tets with no
+        free corner, with ``held``)
+    region : (d,) int
+        its region
+    volumes : (d,) float
+        V_d [m^3]
+    ring_domain, ring_node : (r,) int
+        the ring entries: domain and ring node, sorted by domain
+    ring_gradient : (r, 3) float
+        gbar_da of each ring entry [1/m]
+    corner_entry : (T, 4, 4) int
+        ring entry of (domain of corner c of tet t, node of corner a)
+    corner_domain : (T, 4) int
+        domain of corner c of tet t
+    corner_share : (T, 4) float
+        the share of tet t's volume that corner c gives its domain (1/4 each unless nodes are ``held``; every row sums
+        to 1)
     """
 
     def __init__(self, gradients: TetGradients, node_count: int, regions=None, clusters=None, held=None):

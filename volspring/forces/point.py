@@ -38,12 +38,17 @@ class PointAttractor(MassProportional):
 
     Parameters
     ----------
-    centre : (3,) float -- the centre c [m]
-    strength : float -- S >= 0, units above
+    centre : (3,) float
+        the centre c [m]
+    strength : float
+        S >= 0, units above
     falloff : {"inverse_square", "linear"}
-    radius : float -- R > 0 [m]: softening length or range, see above
-    clamp_jacobian : bool -- clamp the Jacobian's eigenvalues at 0 (default True)
-    masses : (n,) float, optional -- node masses [kg] instead of the model's
+    radius : float
+        R > 0 [m]: softening length or range, see above
+    clamp_jacobian : bool
+        clamp the Jacobian's eigenvalues at 0 (default True)
+    masses : (n,) float, optional
+        node masses [kg] instead of the model's
 
     Notes
     -----
@@ -171,11 +176,16 @@ class Vortex(MassProportional):
 
     Parameters
     ----------
-    point : (3,) float -- a point p on the axis [m]
-    axis : (3,) float -- axis direction a [-], normalised here
-    strength : float -- S [m/s^2], signed: negative turns clockwise about a
-    radius : float -- R > 0 [m], the core radius
-    masses : (n,) float, optional -- node masses [kg] instead of the model's
+    point : (3,) float
+        a point p on the axis [m]
+    axis : (3,) float
+        axis direction a [-], normalised here
+    strength : float
+        S [m/s^2], signed: negative turns clockwise about a
+    radius : float
+        R > 0 [m], the core radius
+    masses : (n,) float, optional
+        node masses [kg] instead of the model's
 
     Notes
     -----

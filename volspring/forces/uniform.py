@@ -111,12 +111,16 @@ class Wind(MassProportional):
 
     Parameters
     ----------
-    direction : (3,) float -- direction the wind blows towards [-], normalised here
-    speed : float or callable -- mean wind speed [m/s], or ``speed(t) -> float`` [m/s] at time t [s]
-    rate : float -- coupling rate c [1/s], >= 0
-    gusts : (k, 3) float -- one row (A, f, phi) per gust: amplitude [m/s], frequency [Hz],
-        phase [rad] (a single gust is ``[(A, f, phi)]``)
-    masses : (n,) float, optional -- node masses [kg] instead of the model's
+    direction : (3,) float
+        direction the wind blows towards [-], normalised here
+    speed : float or callable
+        mean wind speed [m/s], or ``speed(t) -> float`` [m/s] at time t [s]
+    rate : float
+        coupling rate c [1/s], >= 0
+    gusts : (k, 3) float
+        one row (A, f, phi) per gust: amplitude [m/s], frequency [Hz], phase [rad] (a single gust is ``[(A, f, phi)]``)
+    masses : (n,) float, optional
+        node masses [kg] instead of the model's
 
     Notes
     -----

@@ -17,9 +17,11 @@ class CallableForce:
 
     Parameters
     ----------
-    function : callable -- ``function(x, v, t)`` with x, v (n, 3) [m], [m/s] and t [s],
-        returning forces [N] of shape (n, 3); it must not modify x or v
-    name : str, optional -- used in error messages (defaults to the function's name)
+    function : callable
+        ``function(x, v, t)`` with x, v (n, 3) [m], [m/s] and t [s], returning forces [N] of shape (n, 3); it must not
+        modify x or v
+    name : str, optional
+        used in error messages (defaults to the function's name)
 
     Raises
     ------
@@ -74,7 +76,8 @@ class PointLoads:
 
     Parameters
     ----------
-    forces : (n, 3) float -- force on every node [N] (zero rows for unloaded nodes)
+    forces : (n, 3) float
+        force on every node [N] (zero rows for unloaded nodes)
 
     Examples
     --------

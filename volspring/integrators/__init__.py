@@ -50,7 +50,8 @@ def integrator_class(name: str) -> type:
 
     Raises
     ------
-    ValueError -- for an unknown name, listing the known ones
+    ValueError
+        for an unknown name, listing the known ones
     """
     if not isinstance(name, str):
         raise TypeError(f"integrator name must be a str, got {type(name).__name__}")
@@ -70,13 +71,18 @@ def make_integrator(name: str, **options) -> Integrator:
 
     Parameters
     ----------
-    name : str -- one of ``INTEGRATORS`` (aliases: rk2, position_verlet, backward_euler)
-    **options -- passed to the class (the explicit and Verlet schemes take none; see
-        :class:`ImplicitEuler` for the solver options)
+    name : str
+        one of ``INTEGRATORS`` (aliases: rk2, position_verlet, backward_euler)
+    **options
+        passed to the class (the explicit and Verlet schemes take none; see :class:`ImplicitEuler` for the solver
+        options)
 
     Raises
     ------
-    ValueError -- unknown name; TypeError -- options the integrator does not take
+    ValueError
+        unknown name
+    TypeError
+        options the integrator does not take
     """
     cls = integrator_class(name)
     try:

@@ -21,12 +21,15 @@ class Integrator(ABC):
     every scheme needs: a check of its arguments, the projection of constraints, obstacles and
     pins after the step (:meth:`project`), and divergence detection (no NaN or Inf ever leaves a step).
 
-    Class attributes
-    ----------------
-    name : str -- the name used by ``make_integrator`` and the CLI
-    order : int -- global order of accuracy
+    Attributes
+    ----------
+    name : str
+        the name used by ``make_integrator`` and the CLI
+    order : int
+        global order of accuracy
     explicit : bool
-    stability_limit : float -- largest stable h * omega_max for an undamped spring (inf if none)
+    stability_limit : float
+        largest stable h * omega_max for an undamped spring (inf if none)
     """
 
     name: str = ""

@@ -31,12 +31,17 @@ class SolverCache:
 
     Parameters
     ----------
-    solver : a linear solver of :mod:`volspring.solvers` (holds the AMG hierarchy once built)
-    pattern : BlockPattern or None -- of the last scene stepped
-    record : tuple or None -- (pattern, step, t, dt, x, v) the current hierarchy was built from
-    matrix_free : bool -- patterns apply the sets that offer it as products (:class:`BlockPattern`)
-    stand_in : sparse matrix or None -- the preconditioning matrix of the last build when sets are applied as
-        products (their stand-in blocks; rebuilt with the hierarchy, not pickled)
+    solver : a linear solver of :mod:`volspring.solvers`
+        (holds the AMG hierarchy once built)
+    pattern : BlockPattern or None
+        of the last scene stepped
+    record : tuple or None
+        (pattern, step, t, dt, x, v) the current hierarchy was built from
+    matrix_free : bool
+        patterns apply the sets that offer it as products (:class:`BlockPattern`)
+    stand_in : sparse matrix or None
+        the preconditioning matrix of the last build when sets are applied as products (their stand-in blocks; rebuilt
+        with the hierarchy, not pickled)
     """
 
     solver: object

@@ -97,6 +97,8 @@ class AMGConjugateGradient(_LinearSolver):
         ``timer() -> seconds`` behind ``setup_seconds`` and ``solve_seconds`` (default
         :func:`time.perf_counter`).
 
+    Notes
+    -----
     The coarsest level (about a thousand unknowns at 50k nodes) is factorised with sparse LU:
     the default pseudo-inverse spent 1.3 s of a 3.9 s setup in a dense SVD, for the same cycle.
     The candidates B are used as given (``improve_candidates=None``): rigid-body modes are
@@ -266,7 +268,8 @@ class AMGConjugateGradient(_LinearSolver):
 
         Parameters
         ----------
-        matrix : (N, N) sparse -- the current system, same shape as the built one (made BSR, block size 3)
+        matrix : (N, N) sparse
+            the current system, same shape as the built one (made BSR, block size 3)
         """
         hierarchy = self.hierarchy
         if hierarchy is None:
