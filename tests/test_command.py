@@ -66,7 +66,7 @@ def test_the_dispatcher_runs_a_subcommand_with_the_rest_of_the_line(tmp_path, ca
 
 @pytest.mark.parametrize("argv, message", [
     ([], "volspring: error: a command is required: mesh, sim, validate"),
-    (["mseh"], "volspring: error: unknown command 'mseh'; did you mean mesh? (commands: mesh, sim, validate)"),
+    (["mseh"], "volspring: error: unknown command 'mseh'; did you mean mesh? (commands: mesh, sim, validate, sweep)"),
     (["--frobnicate"], "volspring: error: unknown option '--frobnicate'"),
 ])
 def test_the_dispatcher_refuses_a_missing_or_unknown_command_in_one_line(argv, message, capsys):

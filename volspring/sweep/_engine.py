@@ -1,0 +1,376 @@
+"""The sweep itself: combinations -> resolved scenes and their run ids -> runs (serial, or on Dask) -> the folder.
+
+:func:`run_sweep` resolves every combination in the calling process (a run is identified by the hash of its
+resolved scene, :func:`run_id`), skips those whose record is already on disk, and runs the others: in this
+process with ``client=None``, else as one Dask task each on ``client``'s cluster (:func:`sweep_client` makes a
+local cluster of worker processes, or connects to an existing scheduler). What a task carries is the resolved
+scene (a small dict) and the options; the bytes of the mesh files the scenes name are scattered once and shared
+by every task (:func:`_mesh_files`), so the workers need no access to the caller's files. Records come back to the
+calling process, which writes them as they arrive (:mod:`volspring.sweep._table`).
+
+A run that fails is a record with its error (:func:`~volspring.sweep._measure.run_scene` does not raise for the
+run's own failures; a run whose worker dies at every try, Dask's ``KilledWorker``, is recorded so too). A worker
+lost mid-run is not a failure: Dask runs its tasks again on the others (a local cluster's nanny also restarts it).
+Only runs lost to the cluster itself (the scheduler gone) are left without a record, listed in
+:attr:`SweepResult.missing`; running the same sweep again computes them.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import logging
+import os
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+from meshing._io import atomic_path
+from volspring.sweep._measure import run_scene
+from volspring.sweep._parameters import sweep_combinations
+from volspring.sweep._table import TABLE_NAME, read_record, table_columns, write_record, write_table
+
+__all__ = ["BLAS_ENVIRONMENT", "RECORD_FORMAT", "SweepResult", "run_id", "run_sweep", "sweep_client"]
+
+logger = logging.getLogger(__name__)
+
+#: The version of a run record's content: part of every run id, so records of another version are run again.
+RECORD_FORMAT = 1
+#: Environment of the local cluster's workers: one BLAS/OpenMP thread each, so that N workers use N cores
+#: instead of fighting over them (and every run's arithmetic is the serial run's).
+BLAS_ENVIRONMENT = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+#: Seconds between two rewrites of results.csv while runs finish (it is also written at the end).
+TABLE_INTERVAL = 2.0
+
+
+@dataclass(frozen=True, eq=False)
+class SweepResult:
+    """What :func:`run_sweep` did.
+
+    Attributes
+    ----------
+    table : Path
+        ``OUT/results.csv``.
+    records : tuple of dict
+        One per combination, in the sweep's order (the records of :attr:`missing` runs left out).
+    executed : int
+        Runs computed by this call.
+    skipped : int
+        Runs found on disk and not computed again.
+    missing : tuple of str
+        Run ids left without a record (their tasks lost to the cluster); run the sweep again to compute them.
+    """
+
+    table: Path
+    records: tuple
+    executed: int
+    skipped: int
+    missing: tuple = ()
+
+    @property
+    def complete(self) -> bool:
+        """Every combination has its record."""
+        return not self.missing
+
+    @property
+    def failed(self) -> int:
+        """Records of runs that failed or diverged."""
+        return sum(record["status"] != "done" for record in self.records)
+
+
+def run_id(scene: dict, *, files=None, probes=None) -> str:
+    """The id of a run: 16 hex digits of the SHA-256 of its resolved scene, the contents of the mesh files it
+    reads (``files``: name -> SHA-256), its probes and :data:`RECORD_FORMAT`.
+
+    >>> run_id({"duration": 1.0}) == run_id({"duration": 1.0}) != run_id({"duration": 2.0})
+    True
+    """
+    text = json.dumps({"format": RECORD_FORMAT, "scene": scene, "files": files or {}, "probes": probes or {}},
+                      sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=None, seed=0, client=None,
+              probes=None, callback=None, rerun_failed=False) -> SweepResult:
+    """Run a scene file once per combination of parameter values; write one record per run and a table.
+
+    Parameters
+    ----------
+    scene_path : path-like
+        A scene file (``.toml``, :mod:`volspring.scene_file`); its ``output.folder`` is ignored (no frames).
+    parameters : mapping of str to sequence, optional
+        The grid: key path (as ``--set`` takes it) -> values; one run per combination of values.
+    out : path-like
+        The sweep's folder: ``results.csv``, ``sweep.json`` and ``runs/RUN_ID/run.json``.
+    random : mapping of str to (2,) sequence, optional
+        Key path -> ``(low, high)``, ``samples`` draws from a generator of ``seed``
+        (:func:`~volspring.sweep._parameters.sweep_combinations`).
+    samples : int, optional
+    seed : int
+    client : distributed.Client, optional
+        Run on this Dask cluster (:func:`sweep_client`); None runs serially in this process.
+    probes : mapping of str to (3,) float, optional
+        Named points [m]: the displacement of the node nearest each is measured.
+    callback : callable, optional
+        ``callback(record, done, total)`` as each run's record is on disk (``done`` counts the skipped runs too).
+    rerun_failed : bool
+        Compute again the runs whose record on disk is a failure (a diverged run is computed again too).
+
+    Returns
+    -------
+    SweepResult
+
+    Raises
+    ------
+    SceneFileError
+        For a scene file that cannot be read, or parameters that no combination can apply (every one refused).
+    ValueError
+        For parameters that make no sweep (:func:`~volspring.sweep._parameters.sweep_combinations`).
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> from pathlib import Path
+    >>> beam = Path(__file__).parents[2] / "examples" / "scenes" / "beam.toml"
+    >>> out = Path(tempfile.mkdtemp())
+    >>> coarse = {"bodies[0].size": [0.1], "duration": [0.03]}
+    >>> result = run_sweep(beam, {**coarse, "bodies[0].material.E": [1e6, 2e6]}, out)
+    >>> result.executed, [record["status"] for record in result.records], (out / "results.csv").is_file()
+    (2, ['done', 'done'], True)
+    >>> run_sweep(beam, {**coarse, "bodies[0].material.E": [1e6, 2e6, 4e6]}, out).executed
+    1
+    """
+    from volspring.scene_file import SceneFileError, load_toml, resolve_scene, set_value
+
+    scene_path, out = Path(scene_path), Path(out)
+    raw = load_toml(scene_path)
+    combinations = sweep_combinations(parameters, random=random, samples=samples, seed=seed)
+    probes = {name: [float(value) for value in point] for name, point in (probes or {}).items()}
+    resolved, refused = [], []
+    for combination in combinations:
+        scene = copy.deepcopy(raw)
+        try:
+            for key, value in combination.items():
+                set_value(scene, key, value)
+            resolved.append(resolve_scene(scene))
+        except SceneFileError as error:
+            resolved.append(None)
+            refused.append(error)
+    if len(refused) == len(combinations):
+        raise refused[0]
+    files = _mesh_files([scene for scene in resolved if scene is not None], scene_path.parent)
+    digests = {name: entry["sha256"] for name, entry in files.items()}
+    runs = []  # (run id, combination, resolved scene or None, refusal or None)
+    refusals = iter(refused)
+    for combination, scene in zip(combinations, resolved):
+        if scene is None:
+            error = next(refusals)
+            runs.append((run_id({"refused": combination, "error": str(error)}), combination, None, error))
+        else:
+            used = {name: digests[name] for name in _mesh_names(scene) if name in digests}
+            runs.append((run_id(scene, files=used, probes=probes), combination, scene, None))
+
+    keys = list(combinations[0])
+    columns = table_columns(keys, probes)
+    _write_json(out / "sweep.json", {"scene_file": str(scene_path.resolve()), "grid": dict(parameters or {}),
+                                     "random": {key: list(bounds) for key, bounds in (random or {}).items()},
+                                     "samples": samples, "seed": seed, "probes": probes,
+                                     "runs": [identifier for identifier, *_ in runs]})
+    on_disk, pending = {}, {}
+    for identifier, combination, scene, error in runs:
+        record = read_record(out, identifier)
+        if record is not None and not (rerun_failed and record.get("status") != "done"):
+            on_disk[identifier] = record
+        elif identifier not in pending:
+            pending[identifier] = (combination, scene, error)
+    skipped, total = len({identifier for identifier, *_ in runs if identifier in on_disk}), len(set(r[0] for r in runs))
+    logger.info("sweep of %d runs: %d on disk, %d to compute", total, skipped, len(pending))
+    table = out / TABLE_NAME
+    progress = {"done": skipped, "executed": 0, "written": time.monotonic()}
+
+    def finish(identifier, record):
+        combination, scene, _ = pending[identifier]
+        record = {"run": identifier, "parameters": combination, **record, "scene": scene,
+                  "files": {name: digests[name] for name in _mesh_names(scene or {}) if name in digests},
+                  "probes": probes}
+        write_record(out, record)
+        on_disk[identifier] = record
+        progress["done"] += 1
+        progress["executed"] += 1
+        if time.monotonic() - progress["written"] > TABLE_INTERVAL:
+            _write_table(table, runs, on_disk, columns)
+            progress["written"] = time.monotonic()
+        if callback is not None:
+            callback(record, progress["done"], total)
+
+    for identifier, (combination, scene, error) in list(pending.items()):
+        if scene is None:  # refused before running: its row says why
+            finish(identifier, _refused_record(error))
+    runnable = {identifier: scene for identifier, (_, scene, _) in pending.items() if scene is not None}
+    base = str(scene_path.parent.resolve())
+    missing = []
+    try:
+        if client is None:
+            for identifier, scene in runnable.items():
+                finish(identifier, run_scene(scene, base=base, probes=probes) | {"worker": _worker()})
+        else:
+            missing = _run_on_cluster(client, runnable, base, probes, files, finish)
+    finally:
+        _write_table(table, runs, on_disk, columns)
+    if missing:
+        logger.warning("%d of %d runs have no record (lost to the cluster); run the sweep again to compute them",
+                       len(missing), total)
+    records = tuple({**on_disk[identifier], "parameters": combination} for identifier, combination, *_ in runs
+                    if identifier in on_disk)
+    return SweepResult(table, records, progress["executed"], skipped, tuple(missing))
+
+
+def _run_on_cluster(client, runnable, base, probes, files, finish) -> list:
+    """Submit one task per run, ``finish`` each record as it arrives; returns the run ids lost to the cluster."""
+    from distributed import as_completed
+    from distributed.scheduler import KilledWorker
+
+    shared = client.scatter([files], hash=False)[0] if files else None  # once, shared by every task
+    futures = {client.submit(_run_task, scene, base=base, probes=probes, files=shared,
+                             key=f"volspring-sweep-{identifier}", pure=False): identifier
+               for identifier, scene in runnable.items()}
+    missing = []
+    try:
+        for future in as_completed(futures):
+            identifier = futures[future]
+            try:
+                record = future.result()
+            except KilledWorker as error:  # the run killed its worker at every try (memory, a crash): its row
+                record = {**_refused_record(error), "error_type": "KilledWorker"}
+            except Exception as error:  # lost to the cluster, not the run's failure: no record, run it next time
+                logger.warning("run %s: no result from the cluster (%s: %s)", identifier, type(error).__name__, error)
+                missing.append(identifier)
+                continue
+            finally:
+                future.release()
+            finish(identifier, record)
+    finally:
+        client.cancel(list(futures))  # an interruption leaves no task running on a shared cluster
+    return missing
+
+
+def _run_task(scene, *, base, probes, files):
+    """A worker's task: the scattered mesh files written to this machine once, then :func:`run_scene`."""
+    if files:
+        scene = copy.deepcopy(scene)
+        for spec in scene["bodies"]:
+            if "mesh" in spec and spec["mesh"] in files:
+                spec["mesh"] = str(_materialised(files[spec["mesh"]]))
+    return run_scene(scene, base=base, probes=probes) | {"worker": _worker()}
+
+
+def _materialised(entry) -> Path:
+    """The path of a scattered mesh file on this machine, written on first use (with its companions)."""
+    import tempfile
+
+    folder = Path(tempfile.gettempdir()) / f"volspring-sweep-{entry['sha256'][:16]}"
+    for name, data in entry["contents"].items():
+        path = folder / name
+        if not path.is_file():
+            with atomic_path(path) as temporary:
+                temporary.write_bytes(data)
+    return folder / entry["name"]
+
+
+def _mesh_names(scene) -> list:
+    return [spec["mesh"] for spec in scene.get("bodies", []) if isinstance(spec, dict) and "mesh" in spec]
+
+
+def _mesh_files(scenes, base) -> dict:
+    """Name -> ``{"name", "sha256", "contents": {file name: bytes}}`` of every mesh file the scenes name (an
+    XDMF file with its HDF5 data beside it); files that cannot be read are left to the runs to report."""
+    files = {}
+    for name in dict.fromkeys(name for scene in scenes for name in _mesh_names(scene)):
+        path = base / name
+        companions = [path] + ([path.with_suffix(".h5")] if path.suffix.lower() == ".xdmf" else [])
+        try:
+            contents = {file.name: file.read_bytes() for file in companions if file.is_file()}
+        except OSError:
+            continue
+        if path.name not in contents:
+            continue
+        digest = hashlib.sha256(b"".join(hashlib.sha256(data).digest() for _, data in sorted(contents.items())))
+        files[name] = {"name": path.name, "sha256": digest.hexdigest(), "contents": contents}
+    return files
+
+
+def _refused_record(error) -> dict:
+    from volspring.sweep._measure import SOLVER
+
+    return {"status": "failed", "error": " ".join(str(error).split()), "error_type": type(error).__name__,
+            "solver": dict.fromkeys(SOLVER), "measured": {}, "seconds": {"wall": None, "build": None,
+                                                                        "stepping": None}, "warnings": []}
+
+
+def _worker() -> dict:
+    import socket
+
+    return {"host": socket.gethostname(), "pid": os.getpid(),
+            "blas_threads": {name: os.environ.get(name) for name in BLAS_ENVIRONMENT}}
+
+
+def _write_table(table, runs, on_disk, columns) -> None:
+    rows = [{**on_disk[identifier], "parameters": combination} for identifier, combination, *_ in runs
+            if identifier in on_disk]
+    write_table(table, rows, columns)
+
+
+def _write_json(path, data) -> None:
+    with atomic_path(path) as temporary:
+        temporary.write_text(json.dumps(data, indent=1, default=str) + "\n")
+
+
+@contextmanager
+def sweep_client(*, workers=None, scheduler=None):
+    """A Dask client for :func:`run_sweep`: on a new local cluster, or on the scheduler at ``scheduler``.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Worker processes of the local cluster, one thread each with :data:`BLAS_ENVIRONMENT` (default: the CPU
+        count). Not used with ``scheduler``.
+    scheduler : str, optional
+        The address of a running scheduler (``tcp://host:8786``, started by ``dask scheduler``); its workers are
+        the cluster's own (start them with ``--nthreads 1`` and ``OMP_NUM_THREADS=1``).
+
+    Yields
+    ------
+    distributed.Client
+        Closed (and the local cluster shut down) when the block ends.
+    """
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        with Client(scheduler) as client:
+            client.run(_warm_up)
+            yield client
+        return
+    workers = (os.cpu_count() or 1) if workers is None else int(workers)
+    if workers < 1:
+        raise ValueError(f"workers = {workers} is not >= 1")
+    # Dask's statistical profiler samples the running task every 10 ms: 5-10% of a run's time, for a profile
+    # nobody reads here. The workers take the configuration as it is when they start.
+    with dask.config.set({"distributed.worker.profile.enabled": False}), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                         env=dict(BLAS_ENVIRONMENT), silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
+        client.run(_warm_up)
+        logger.info("local cluster of %d worker processes; its dashboard: %s", workers, client.dashboard_link)
+        yield client
+
+
+def _warm_up() -> None:
+    """Import what a run needs (1-3 s: scipy, pyamg, gmsh), on every worker at once as the cluster starts,
+    rather than in the first run of each."""
+    import importlib
+
+    for name in ("volspring.sweep._measure", "volspring.scene_file._assemble", "volspring.simulate",
+                 "volspring.integrators.implicit", "meshing.tetrahedralize", "pyamg"):
+        importlib.import_module(name)
