@@ -197,7 +197,7 @@ def remove_stale_temporaries(folder, *, now=None) -> list:
     """
     folder = Path(folder)
     now = time.time() if now is None else float(now)
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(os.scandir(folder))
     except (FileNotFoundError, NotADirectoryError):

@@ -22,6 +22,10 @@ import numpy as np
 from meshing.geometry import BarycentricFrames, barycentric_frames, nearest_surface_points
 from meshing.mesh import TetMesh
 from meshing.tolerances import ON_SURFACE
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["Anchor", "anchor"]
 
@@ -83,7 +87,7 @@ class WeightedAnchor:
         rows = np.repeat(np.arange(self.point_count), self.nodes.shape[1])
         return csr_matrix((self.weights.ravel(), (rows, self.nodes.ravel())), shape=(self.point_count, self.node_count))
 
-    def deform(self, x) -> np.ndarray:
+    def deform(self, x: np.ndarray) -> np.ndarray:
         """Surface vertex positions for deformed node positions.
 
         Parameters
@@ -143,7 +147,8 @@ class Anchor(WeightedAnchor):
     node_owner = "the tet mesh's"
 
 
-def anchor(tet_mesh: TetMesh, surface, *, tolerance: float = ON_SURFACE, max_distance: float | None = None) -> Anchor:
+def anchor(tet_mesh: TetMesh, surface: trimesh.Trimesh | np.ndarray, *, tolerance: float = ON_SURFACE,
+           max_distance: float | None = None) -> Anchor:
     """Bind every vertex of a render surface to the tet containing it, by barycentric weights.
 
     Parameters

@@ -32,6 +32,7 @@ from pathlib import Path
 from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, Parser, Stopped, UsageError,
                                    add_common_options, advance_to, error_line, progress_bar, progress_mode,
                                    signals_as_exceptions, stdout_to_stderr)
+from collections.abc import Sequence
 
 __all__ = ["main", "sidecar_path"]
 
@@ -72,7 +73,7 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def sidecar_path(path) -> Path:
+def sidecar_path(path: str | os.PathLike[str]) -> Path:
     """The spring topology file written beside a tet mesh output with ``--shells``: ``NAME.vstopo.npz``.
 
     >>> sidecar_path("out/beam.vtu").as_posix()
@@ -227,7 +228,7 @@ def _write(output: Path, file_format, mesh, topology, shells: int) -> str:
             f"{layers}; volspring-sim reads it)")
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run ``volspring mesh`` (``volspring-mesh``) with ``argv`` (default: the command line); returns the exit
     status.
 

@@ -8,11 +8,16 @@ and the statics' AMG, the FEM reference) and the set of motions a support must h
 from __future__ import annotations
 
 import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["rigid_body_modes"]
 
 
-def rigid_body_modes(points, *, components=None, centre=None, scale=None) -> np.ndarray:
+def rigid_body_modes(points: ArrayLike, *, components: ArrayLike | None = None, centre: ArrayLike | None = None,
+                     scale: float | None = None) -> np.ndarray:
     """The six infinitesimal rigid motions (translations, rotations) of a set of points, as displacement columns.
 
     Columns: unit translations along x, y, z, then rotations ``e_axis x (p - centre) / scale`` about x, y, z

@@ -17,11 +17,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshing.tolerances import ON_SURFACE, ZERO_VOLUME
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["BarycentricFrames", "barycentric_frames", "signed_tet_volumes", "signed_volumes"]
 
 
-def signed_volumes(a, b, c, d) -> np.ndarray:
+def signed_volumes(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
     """Signed volume of the tet (a, b, c, d) for each row.
 
     Parameters
@@ -45,7 +49,7 @@ def signed_volumes(a, b, c, d) -> np.ndarray:
     return np.einsum("ij,ij->i", b - a, np.cross(c - a, d - a)) / 6.0
 
 
-def signed_tet_volumes(points, tets) -> np.ndarray:
+def signed_tet_volumes(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
     """Signed volume of each tet of a mesh.
 
     Parameters
@@ -91,7 +95,7 @@ class BarycentricFrames:
     origin: np.ndarray
     flat: np.ndarray
 
-    def weights(self, points, tets) -> np.ndarray:
+    def weights(self, points: np.ndarray, tets: np.ndarray) -> np.ndarray:
         """(q, 4) float -- weights of ``points[i]`` ((q, 3) [m]) in tet ``tets[i]`` ((q,) int), extrapolated outside.
 
         Each row sums to 1 and reproduces the point: ``sum_j w_j x_j = p`` (to round-off) for a tet that is not flat.
@@ -99,7 +103,8 @@ class BarycentricFrames:
         beta = np.einsum("qij,qj->qi", self.inverse[tets], points - self.origin[tets])
         return np.concatenate([1.0 - beta.sum(axis=1, keepdims=True), beta], axis=1)
 
-    def contains(self, points, tets, *, tolerance: float = ON_SURFACE):
+    def contains(self, points: np.ndarray, tets: np.ndarray, *,
+                 tolerance: float = ON_SURFACE) -> tuple[np.ndarray, np.ndarray]:
         """Whether ``points[i]`` lies in tet ``tets[i]``: all four weights ``>= -tolerance`` and the tet not flat.
 
         Parameters
@@ -126,7 +131,7 @@ class BarycentricFrames:
         return inside, weights
 
 
-def barycentric_frames(corners) -> BarycentricFrames:
+def barycentric_frames(corners: ArrayLike) -> BarycentricFrames:
     """The barycentric maps of a set of tets, by the adjugate of their edge matrices.
 
     Parameters

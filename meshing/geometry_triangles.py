@@ -16,6 +16,11 @@ from __future__ import annotations
 import numpy as np
 
 from meshing.tolerances import CANCELLED
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from scipy.spatial import cKDTree
 
 __all__ = ["area_weighted_vertex_normals", "closest_points_on_triangles", "nearest_surface_points",
            "triangle_area_normals"]
@@ -28,7 +33,7 @@ def _dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
 
-def triangle_area_normals(points, faces) -> np.ndarray:
+def triangle_area_normals(points: ArrayLike, faces: ArrayLike) -> np.ndarray:
     """(f, 3) float -- ``(x1 - x0) x (x2 - x0)`` per triangle: twice its area [m^2] times its right-hand unit normal.
 
     Examples
@@ -41,7 +46,7 @@ def triangle_area_normals(points, faces) -> np.ndarray:
     return np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
 
 
-def area_weighted_vertex_normals(points, faces, *, node_count=None) -> np.ndarray:
+def area_weighted_vertex_normals(points: np.ndarray, faces: ArrayLike, *, node_count: int | None = None) -> np.ndarray:
     """Unit vertex normals, each the area-weighted mean of the normals of the triangles around the vertex.
 
     Parameters
@@ -79,7 +84,8 @@ def area_weighted_vertex_normals(points, faces, *, node_count=None) -> np.ndarra
     return np.divide(summed, length[:, None], out=np.zeros_like(summed), where=has_normal)
 
 
-def closest_points_on_triangles(p, a, b, c) -> tuple[np.ndarray, np.ndarray]:
+def closest_points_on_triangles(p: np.ndarray, a: np.ndarray, b: np.ndarray,
+                                c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Closest point on each triangle to each point, pairwise (Ericson, Real-Time Collision Detection 5.1.5).
 
     Parameters
@@ -130,7 +136,8 @@ def closest_points_on_triangles(p, a, b, c) -> tuple[np.ndarray, np.ndarray]:
     return closest, bary
 
 
-def nearest_surface_points(points, vertices, faces, *, tree=None):
+def nearest_surface_points(points: ArrayLike, vertices: ArrayLike, faces: ArrayLike, *,
+                           tree: cKDTree | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Exact nearest point of a triangle set to each query point.
 
     A k-d tree over the triangle centroids proposes the ``k`` nearest triangles; a point is settled once its

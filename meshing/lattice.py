@@ -46,6 +46,11 @@ from functools import cached_property
 import numpy as np
 
 from meshing.anchoring import WeightedAnchor, _surface_arrays
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    import trimesh
 
 __all__ = ["CORNERS", "LATTICE_FAMILIES", "Lattice", "LatticeAnchor", "anchor_lattice", "box_lattice", "voxelize"]
 
@@ -189,7 +194,7 @@ class Lattice:
         volumes.setflags(write=False)
         return volumes
 
-    def node_of(self, index) -> np.ndarray:
+    def node_of(self, index: ArrayLike) -> np.ndarray:
         """(k,) int64 -- the node at each grid index (k, 3), -1 where the lattice has none."""
         index = np.asarray(index, dtype=np.int64).reshape(-1, 3)
         keys, shape = self._node_table[0], self._node_shape
@@ -198,7 +203,7 @@ class Lattice:
         where = np.minimum(np.searchsorted(keys, query), len(keys) - 1)
         return np.where(valid & (keys[where] == query), where, -1)
 
-    def cell_of(self, index) -> np.ndarray:
+    def cell_of(self, index: ArrayLike) -> np.ndarray:
         """(k,) int64 -- the cell with each grid index (k, 3) (its lowest corner), -1 where none is kept."""
         index = np.asarray(index, dtype=np.int64).reshape(-1, 3)
         shape = self._node_shape
@@ -308,7 +313,7 @@ def _unique_pairs(pairs, weights, node_count) -> tuple:
     return np.stack([unique // node_count, unique % node_count], axis=1), summed
 
 
-def box_lattice(cells, size, *, origin=(0.0, 0.0, 0.0)) -> Lattice:
+def box_lattice(cells: ArrayLike, size: ArrayLike, *, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Lattice:
     """The full lattice of a box of ``cells`` cubic cells: the nodes of ``structured_box(cells, size)``, in order.
 
     Parameters
@@ -331,7 +336,7 @@ def box_lattice(cells, size, *, origin=(0.0, 0.0, 0.0)) -> Lattice:
     return Lattice(np.asarray(origin, dtype=np.float64), float(edges[0]), grid, np.ones(len(grid)))
 
 
-def voxelize(surface, cell_size: float, *, samples: int = 4) -> Lattice:
+def voxelize(surface: trimesh.Trimesh, cell_size: float, *, samples: int = 4) -> Lattice:
     """The lattice of cubic cells overlapping the inside of a closed surface (module docstring).
 
     Parameters
@@ -439,7 +444,7 @@ class LatticeAnchor(WeightedAnchor):
     node_owner = "the lattice's"
 
 
-def anchor_lattice(lattice: Lattice, surface) -> LatticeAnchor:
+def anchor_lattice(lattice: Lattice, surface: trimesh.Trimesh | np.ndarray) -> LatticeAnchor:
     """Bind every vertex of a render surface to the lattice cell holding it, by trilinear weights.
 
     Parameters

@@ -20,6 +20,13 @@ import numpy as np
 from meshing.mesh_orientation import (TET_EDGES, TET_FACES, _compact_arrays, _oriented_arrays,  # noqa: F401
                                       _used_nodes, _volumes_and_extents)
 from meshing.tolerances import ZERO_VOLUME
+from collections.abc import Mapping
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import meshio
+    from numpy.typing import ArrayLike
 
 __all__ = ["TET_EDGES", "TET_FACES", "TetMesh"]
 
@@ -98,7 +105,7 @@ class TetMesh:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def oriented(cls, points, tets) -> "TetMesh":
+    def oriented(cls, points: np.ndarray, tets: np.ndarray) -> "TetMesh":
         """Build a mesh whose tets are all positively oriented, or all negatively (then flipped).
 
         Some file formats and meshers number every tet the other way round: such a mesh is flipped
@@ -135,7 +142,7 @@ class TetMesh:
         return cls(*_oriented_arrays(points, tets))
 
     @classmethod
-    def compact(cls, points, tets) -> "TetMesh":
+    def compact(cls, points: np.ndarray, tets: ArrayLike) -> "TetMesh":
         """Build a mesh from a mesher's output: unused nodes dropped, each tet put in positive order.
 
         Meant for tets that come in arbitrary orientation by construction (scipy's ``Delaunay``
@@ -245,26 +252,27 @@ class TetMesh:
         """(n,) float -- a quarter of the volume of every tet around each node [m^3]."""
         return np.bincount(self.tets.ravel(), weights=np.repeat(self._volumes / 4.0, 4), minlength=self.node_count)
 
-    def with_points(self, points) -> "TetMesh":
+    def with_points(self, points: np.ndarray) -> "TetMesh":
         """A copy with other node positions (same tets); raises if that inverts a tet."""
         return TetMesh(points, self.tets)
 
     # ------------------------------------------------------------------ files (meshing.mesh_io)
-    def to_meshio(self, *, point_data=None, cell_data=None):
+    def to_meshio(self, *, point_data: Mapping[str, np.ndarray] | None = None,
+                  cell_data: Mapping[str, np.ndarray] | None = None) -> meshio.Mesh:
         """A ``meshio.Mesh`` with one ``tetra`` block; ``cell_data`` values are (m,) arrays."""
         from meshing.mesh_io import tet_mesh_to_meshio
 
         return tet_mesh_to_meshio(self, point_data=point_data, cell_data=cell_data)
 
     @classmethod
-    def from_meshio(cls, mesh) -> "TetMesh":
+    def from_meshio(cls, mesh: meshio.Mesh) -> "TetMesh":
         """Take the ``tetra`` cells of a ``meshio.Mesh`` (:func:`meshing.mesh_io.tet_mesh_from_meshio`)."""
         from meshing.mesh_io import tet_mesh_from_meshio
 
         return tet_mesh_from_meshio(mesh)
 
     @classmethod
-    def read(cls, path, *, units: str = "m", scale=None) -> "TetMesh":
+    def read(cls, path: str | os.PathLike[str], *, units: str = "m", scale: float | None = None) -> "TetMesh":
         """Read any volume mesh format meshio knows (.vtu, .msh, .mesh, .xdmf, ...), in metres.
 
         ``units`` ({"m", "cm", "mm"}) is the length unit of the file's coordinates and ``scale`` a further
@@ -277,7 +285,8 @@ class TetMesh:
 
         return read_tet_mesh(path, units=units, scale=scale, stacklevel=4)  # the warning points at our caller
 
-    def write(self, path, *, point_data=None, cell_data=None, file_format=None) -> Path:
+    def write(self, path: str | os.PathLike[str], *, point_data: Mapping[str, np.ndarray] | None = None,
+              cell_data: Mapping[str, np.ndarray] | None = None, file_format: str | None = None) -> Path:
         """Write the mesh in the format its extension names, atomically; returns ``path``.
 
         ``point_data`` and ``cell_data`` map names to (n, ...) values per node and (m, ...) per tet;

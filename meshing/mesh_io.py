@@ -32,6 +32,11 @@ import numpy as np
 from meshing._io import atomic_path
 from meshing.mesh import TetMesh, _used_nodes
 from meshing.units import length_factor, scaled_points, warn_if_large
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import meshio
 
 __all__ = [
     "PREFERRED_FORMATS",
@@ -53,7 +58,8 @@ PREFERRED_FORMATS = {".msh": "gmsh"}
 REGION_TAG_NAMES = ("gmsh:physical", "medit:ref", "region")
 
 
-def tet_mesh_to_meshio(mesh: TetMesh, *, point_data=None, cell_data=None):
+def tet_mesh_to_meshio(mesh: TetMesh, *, point_data: Mapping[str, np.ndarray] | None = None,
+                       cell_data: Mapping[str, np.ndarray] | None = None) -> meshio.Mesh:
     """A ``meshio.Mesh`` with one ``tetra`` block.
 
     Parameters
@@ -78,7 +84,7 @@ def tet_mesh_to_meshio(mesh: TetMesh, *, point_data=None, cell_data=None):
     )
 
 
-def tet_mesh_from_meshio(mesh) -> TetMesh:
+def tet_mesh_from_meshio(mesh: meshio.Mesh) -> TetMesh:
     """Take the ``tetra`` cells of a ``meshio.Mesh`` (other cells are ignored).
 
     Nodes that no tet uses (for example the nodes of lower-dimensional cells only) are dropped
@@ -114,7 +120,8 @@ def tet_mesh_from_meshio(mesh) -> TetMesh:
     return TetMesh.oriented(points, used)
 
 
-def read_tet_mesh(path, *, units: str = "m", scale=None, stacklevel: int = 3) -> TetMesh:
+def read_tet_mesh(path: str | os.PathLike[str], *, units: str = "m", scale: float | None = None,
+                  stacklevel: int = 3) -> TetMesh:
     """Read any volume mesh format meshio knows (.vtu, .msh, .mesh, .xdmf, ...); ``TetMesh.read`` calls it.
 
     Parameters
@@ -176,7 +183,7 @@ def _read_meshio(path):
         raise ValueError(f"cannot read {path} as a {file_format} mesh ({detail})") from None
 
 
-def read_tet_regions(path, *, name=None):
+def read_tet_regions(path: str | os.PathLike[str], *, name: str | None = None) -> np.ndarray | None:
     """The region tag of every tet of a mesh file, in the order of :func:`read_tet_mesh`'s tets, or None.
 
     The tags are the file's cell data on its ``tetra`` blocks: gmsh physical groups
@@ -236,7 +243,8 @@ def read_tet_regions(path, *, name=None):
     return tags
 
 
-def write_tet_mesh(mesh: TetMesh, path, *, point_data=None, cell_data=None, file_format=None) -> Path:
+def write_tet_mesh(mesh: TetMesh, path: str | os.PathLike[str], *, point_data: Mapping[str, np.ndarray] | None = None,
+                   cell_data: Mapping[str, np.ndarray] | None = None, file_format: str | None = None) -> Path:
     """Write a mesh in the format its extension names, atomically (temporary names, then renames).
 
     ``TetMesh.write`` calls it. XDMF (``.xdmf``, ``.xmf``) is two files: the XML ``stem.xdmf`` and its
@@ -298,7 +306,7 @@ def _write_xdmf(path: Path, mesh) -> None:
         shutil.rmtree(folder, ignore_errors=True)
 
 
-def mesh_file_format(path) -> str:
+def mesh_file_format(path: str | os.PathLike[str]) -> str:
     """The meshio format name for a file's extension, or a ValueError naming the known ones.
 
     >>> mesh_file_format("beam.msh"), mesh_file_format("beam.vtu")

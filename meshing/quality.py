@@ -85,7 +85,7 @@ def _raw_metrics(points, tets):
     return volumes, np.where(volumes > 0, min_dihedral, 0.0), ratio
 
 
-def tet_volumes(mesh_or_points, tets=None) -> np.ndarray:
+def tet_volumes(mesh_or_points: TetMesh | np.ndarray, tets: np.ndarray | None = None) -> np.ndarray:
     """Volume of each tet.
 
     Parameters
@@ -108,7 +108,7 @@ def tet_volumes(mesh_or_points, tets=None) -> np.ndarray:
     return _checked_volumes(*_arrays(mesh_or_points, tets))
 
 
-def min_dihedral_angles(mesh_or_points, tets=None) -> np.ndarray:
+def min_dihedral_angles(mesh_or_points: TetMesh | np.ndarray, tets: np.ndarray | None = None) -> np.ndarray:
     """Smallest of the six interior dihedral angles of each tet.
 
     Returns
@@ -126,7 +126,7 @@ def min_dihedral_angles(mesh_or_points, tets=None) -> np.ndarray:
     return _raw_metrics(points, tets)[1]
 
 
-def radius_ratios(mesh_or_points, tets=None) -> np.ndarray:
+def radius_ratios(mesh_or_points: TetMesh | np.ndarray, tets: np.ndarray | None = None) -> np.ndarray:
     """Radius ratio ``3 r_in / R_circ`` of each tet.
 
     Returns
@@ -198,7 +198,7 @@ class QualitySummary:
         ])
 
 
-def quality_summary(mesh_or_points, tets=None) -> QualitySummary:
+def quality_summary(mesh_or_points: TetMesh | np.ndarray, tets: np.ndarray | None = None) -> QualitySummary:
     """Summarise the volumes, minimum dihedral angles and radius ratios of a tet mesh.
 
     Parameters

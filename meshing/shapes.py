@@ -15,6 +15,10 @@ from typing import Callable
 import numpy as np
 
 from meshing.geometry import triangle_area_normals
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["SHAPE_NAMES", "Shape", "box", "capsule", "cylinder", "ellipsoid", "l_bracket", "l_bracket_polygon",
            "parse_shape", "sphere", "torus"]
@@ -111,7 +115,7 @@ class Shape:
             half = (d[0],) * 3
         return np.array([[-h for h in half], list(half)], dtype=np.float64)
 
-    def surface(self, *, size: float):
+    def surface(self, *, size: float) -> trimesh.Trimesh:
         """A closed, outward-wound triangle surface of the shape with edges of about ``size``.
 
         Parameters

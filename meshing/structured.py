@@ -25,6 +25,7 @@ Examples
 from __future__ import annotations
 
 import numpy as np
+from collections.abc import Sequence
 
 from meshing.geometry import signed_tet_volumes
 from meshing.mesh import TetMesh
@@ -35,7 +36,8 @@ __all__ = ["KUHN_PATHS", "jittered_cube", "structured_box"]
 KUHN_PATHS = ((0, 4, 6, 7), (0, 4, 5, 7), (0, 2, 6, 7), (0, 2, 3, 7), (0, 1, 5, 7), (0, 1, 3, 7))
 
 
-def structured_box(cells, size, *, origin=(0.0, 0.0, 0.0), pattern: str = "mirrored") -> TetMesh:
+def structured_box(cells: Sequence[int], size: Sequence[float], *, origin: Sequence[float] = (0.0, 0.0, 0.0),
+                   pattern: str = "mirrored") -> TetMesh:
     """A box of ``cells`` grid cells, six Kuhn tets per cell.
 
     Parameters

@@ -20,6 +20,10 @@ from meshing.surface_intersection import _crossing_face_pairs
 from meshing.surface_winding import contains_points, winding_numbers
 from meshing.tolerances import LARGEST_COORDINATE
 from meshing.units import length_factor, scaled_points, warn_if_large
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["SURFACE_EXTENSIONS", "SurfaceError", "contains_points", "load_surface", "winding_numbers"]
 
@@ -33,7 +37,8 @@ class SurfaceError(ValueError):
     """A surface that cannot bound a solid, with what is wrong and where."""
 
 
-def load_surface(source, *, name: str | None = None, units: str = "m", scale=None):
+def load_surface(source: str | os.PathLike[str] | trimesh.Trimesh, *, name: str | None = None, units: str = "m",
+                 scale: float | None = None) -> trimesh.Trimesh:
     """Load a triangle surface and make sure it bounds a solid, repairing what trimesh can.
 
     Repairs (each logged at INFO level with counts): merging vertices at the same position

@@ -8,6 +8,11 @@ is its boolean form for a ``trimesh.Trimesh``. Both are re-exported by :mod:`mes
 from __future__ import annotations
 
 import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    import trimesh
 
 __all__ = ["contains_points", "winding_numbers"]
 
@@ -16,7 +21,7 @@ __all__ = ["contains_points", "winding_numbers"]
 _RAY_FRAME = np.linalg.qr(np.array([[0.8273, 0.1947, -0.3361], [0.2214, 0.9318, 0.1123], [0.3527, -0.0716, 0.9671]]))[0]
 
 
-def winding_numbers(vertices, faces, points, *, chunk: int = 2_000_000) -> np.ndarray:
+def winding_numbers(vertices: ArrayLike, faces: ArrayLike, points: ArrayLike, *, chunk: int = 2_000_000) -> np.ndarray:
     """Winding number of a closed, outward-wound triangle surface around each point.
 
     Counts signed crossings of a ray from each point (one fixed generic direction), with the
@@ -91,6 +96,6 @@ def winding_numbers(vertices, faces, points, *, chunk: int = 2_000_000) -> np.nd
     return winding
 
 
-def contains_points(surface, points) -> np.ndarray:
+def contains_points(surface: trimesh.Trimesh, points: np.ndarray) -> np.ndarray:
     """(k,) bool -- whether each point lies inside a closed, outward-wound ``trimesh.Trimesh``."""
     return winding_numbers(surface.vertices, surface.faces, points) > 0

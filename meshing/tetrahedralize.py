@@ -14,6 +14,11 @@ import os
 from meshing.mesh import TetMesh
 from meshing.tetrahedralize_delaunay import _delaunay_tets
 from meshing.tetrahedralize_gmsh import _gmsh_tets
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.shapes import Shape
+    import trimesh
 
 __all__ = ["MAX_TETS", "METHODS", "TETS_PER_CUBIC_SIZE", "estimated_tet_count", "excess_volume_fraction",
            "tetrahedralize"]
@@ -34,7 +39,7 @@ def estimated_tet_count(volume: float, size: float) -> float:
     return TETS_PER_CUBIC_SIZE * volume / size**3
 
 
-def excess_volume_fraction(mesh: TetMesh, body) -> float:
+def excess_volume_fraction(mesh: TetMesh, body: Shape | trimesh.Trimesh | float) -> float:
     """How much more volume the tets hold than the body, relative to the body's: ``(V_mesh - V_body) / V_body``.
 
     With the Delaunay backend's enclosing band this is the band's extra volume net of the chords' deficit;
@@ -60,8 +65,8 @@ def excess_volume_fraction(mesh: TetMesh, body) -> float:
     return (mesh.volume - volume) / volume
 
 
-def tetrahedralize(surface, *, size: float, method: str = "gmsh", seed: int | None = None,
-                   feature_angle: float = 40.0, enclosing_band: bool | None = None,
+def tetrahedralize(surface: trimesh.Trimesh | Shape | str | os.PathLike[str], *, size: float, method: str = "gmsh",
+                   seed: int | None = None, feature_angle: float = 40.0, enclosing_band: bool | None = None,
                    verbose: bool = False) -> TetMesh:
     """Fill a closed surface with tetrahedra of edge length about ``size``.
 

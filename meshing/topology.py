@@ -8,6 +8,10 @@ from functools import cached_property
 import numpy as np
 
 from meshing.mesh import TetMesh
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["SPRING_KINDS", "SpringTopology", "TOPOLOGY_KINDS", "kind_counts", "vector_lengths"]
 
@@ -20,14 +24,14 @@ SPRING_KINDS = ("tet_edge", "shell", "shell_diagonal", "shell_edge", "lattice_st
 TOPOLOGY_KINDS = SPRING_KINDS[:4]
 
 
-def kind_counts(kinds) -> dict:
+def kind_counts(kinds: ArrayLike) -> dict:
     """Number of springs of each kind, by label: every kind of a topology (:data:`TOPOLOGY_KINDS`, zero where
     absent) and any other kind present."""
     counts = np.bincount(np.asarray(kinds, dtype=np.int64), minlength=len(SPRING_KINDS))
     return {name: int(count) for name, count in zip(SPRING_KINDS, counts) if name in TOPOLOGY_KINDS or count}
 
 
-def vector_lengths(vectors) -> np.ndarray:
+def vector_lengths(vectors: np.ndarray) -> np.ndarray:
     """(k,) float -- Euclidean length of each row of a (k, 3) array.
 
     Rest lengths and current lengths both come from here, so that forces at the rest shape are

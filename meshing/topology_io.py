@@ -71,7 +71,7 @@ READABLE_VERSIONS = (1,)
 TOPOLOGY_SUFFIX = ".vstopo.npz"
 
 
-def is_topology_path(path) -> bool:
+def is_topology_path(path: str | os.PathLike[str]) -> bool:
     """Whether a file name is a topology file's: it ends in ``.npz`` (no tet mesh format uses that).
 
     >>> is_topology_path("beam.vstopo.npz"), is_topology_path("beam.NPZ"), is_topology_path("beam.vtu")
@@ -109,7 +109,8 @@ def topology_arrays(topology: SpringTopology, *, prefix: str = "") -> dict:
     return {prefix + name: array for name, array in arrays.items()}
 
 
-def topology_from_arrays(arrays, path, *, prefix: str = "", factor: float = 1.0) -> SpringTopology:
+def topology_from_arrays(arrays: dict[str, np.ndarray], path: str | os.PathLike[str], *, prefix: str = "",
+                         factor: float = 1.0) -> SpringTopology:
     """The topology held by a file's arrays (:func:`topology_arrays`' layout), through its own checks.
 
     Parameters
@@ -156,7 +157,7 @@ def topology_from_arrays(arrays, path, *, prefix: str = "", factor: float = 1.0)
         raise ValueError(f"{path} holds an invalid spring topology: {error}") from error
 
 
-def write_topology(path, topology: SpringTopology) -> Path:
+def write_topology(path: str | os.PathLike[str], topology: SpringTopology) -> Path:
     """Write a spring topology (tet mesh, shell nodes, springs, shell triangles) to a file, atomically.
 
     Parameters
@@ -173,7 +174,8 @@ def write_topology(path, topology: SpringTopology) -> Path:
     return write_archive(path, topology_arrays(topology), format_name=TOPOLOGY_FORMAT, version=TOPOLOGY_VERSION)
 
 
-def read_topology(path, *, units: str = "m", scale=None, stacklevel: int = 3) -> SpringTopology:
+def read_topology(path: str | os.PathLike[str], *, units: str = "m", scale: float | None = None,
+                  stacklevel: int = 3) -> SpringTopology:
     """Read a spring topology file written by :func:`write_topology`.
 
     Parameters

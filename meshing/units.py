@@ -21,6 +21,11 @@ import numbers
 import warnings
 
 import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    import argparse
 
 __all__ = ["LARGE_BODY_DIAGONAL", "UNITS", "add_unit_arguments", "length_factor", "scaled_points", "warn_if_large"]
 
@@ -37,7 +42,7 @@ UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 LARGE_BODY_DIAGONAL = 10.0
 
 
-def length_factor(units: str = "m", scale=None) -> float:
+def length_factor(units: str = "m", scale: float | None = None) -> float:
     """The factor that turns input coordinates into metres: ``UNITS[units] * scale``.
 
     Parameters
@@ -70,7 +75,7 @@ def length_factor(units: str = "m", scale=None) -> float:
     return UNITS[units] * float(scale)
 
 
-def scaled_points(points, factor: float, *, name: str) -> np.ndarray:
+def scaled_points(points: ArrayLike, factor: float, *, name: str) -> np.ndarray:
     """Input coordinates times ``factor`` (from :func:`length_factor`), refusing a product that overflows.
 
     Parameters
@@ -105,7 +110,7 @@ def scaled_points(points, factor: float, *, name: str) -> np.ndarray:
     return scaled
 
 
-def warn_if_large(points, *, units: str, scale, name: str, stacklevel: int = 3) -> None:
+def warn_if_large(points: ArrayLike, *, units: str, scale: float | None, name: str, stacklevel: int = 3) -> None:
     """Warn (``UserWarning``, and log) when a body read in metres with no explicit scale is over 10 m across.
 
     Parameters
@@ -133,7 +138,8 @@ def warn_if_large(points, *, units: str, scale, name: str, stacklevel: int = 3) 
     warnings.warn(message, UserWarning, stacklevel=stacklevel)
 
 
-def add_unit_arguments(parser, *, applies_to: str, scale_applies_to: str | None = None) -> None:
+def add_unit_arguments(parser: argparse.ArgumentParser, *, applies_to: str,
+                       scale_applies_to: str | None = None) -> None:
     """Add ``--units {m,cm,mm}`` and ``--scale FACTOR`` to an ``argparse`` parser.
 
     Their values go straight to the readers: ``TetMesh.read(path, units=args.units, scale=args.scale)``

@@ -105,3 +105,31 @@ def energy_gradient(element_set, x, h=1e-6):
             step[i, c] = h
             gradient[i, c] = (element_set.energy(x + step) - element_set.energy(x - step)) / (2 * h)
     return gradient
+
+
+# ---------------------------------------------------------------------------- the public API (docstrings, typing)
+PACKAGES = ("meshing", "volspring", "validation")
+
+
+def public_modules(*, skip=()) -> list:
+    """Dotted names of the public modules of the three packages: no component starting with ``_``; ``skip``
+    names packages (and their submodules) to leave out."""
+    import pathlib
+
+    root = pathlib.Path(__file__).resolve().parents[1]
+    names = []
+    for package in PACKAGES:
+        for path in sorted((root / package).rglob("*.py")):
+            parts = path.relative_to(root).with_suffix("").parts
+            if parts[-1] == "__init__":
+                parts = parts[:-1]
+            name = ".".join(parts)
+            if not any(part.startswith("_") for part in parts) and \
+                    not any(name == left or name.startswith(left + ".") for left in skip):
+                names.append(name)
+    return names
+
+
+def defined_here(obj) -> bool:
+    """Whether ``obj`` is defined in one of the three packages (not re-exported from a dependency)."""
+    return (getattr(obj, "__module__", None) or "").split(".")[0] in PACKAGES

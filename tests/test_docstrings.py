@@ -25,26 +25,11 @@ import warnings
 import pytest
 from numpydoc.docscrape import ClassDoc, FunctionDoc, NumpyDocString
 
+from conftest import defined_here, public_modules
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-PACKAGES = ("meshing", "volspring", "validation")
 #: The sections whose entries are ``name : type`` (or just ``type``) with a description below.
 ENTRY_SECTIONS = ("Parameters", "Other Parameters", "Returns", "Yields", "Receives", "Raises", "Warns", "Attributes")
-
-
-def public_modules() -> list[str]:
-    names = []
-    for package in PACKAGES:
-        for path in sorted((ROOT / package).rglob("*.py")):
-            parts = path.relative_to(ROOT).with_suffix("").parts
-            if parts[-1] == "__init__":
-                parts = parts[:-1]
-            if not any(part.startswith("_") for part in parts):
-                names.append(".".join(parts))
-    return names
-
-
-def _own(obj) -> bool:
-    return (getattr(obj, "__module__", None) or "").split(".")[0] in PACKAGES
 
 
 def documented_objects(module_name: str):
@@ -52,7 +37,7 @@ def documented_objects(module_name: str):
     module = importlib.import_module(module_name)
     for name in getattr(module, "__all__", ()):
         obj = getattr(module, name)
-        if inspect.isclass(obj) and _own(obj):
+        if inspect.isclass(obj) and defined_here(obj):
             yield f"{module_name}.{name}", obj, "class"
             for member_name, member in vars(obj).items():
                 if member_name.startswith("_"):
@@ -63,7 +48,7 @@ def documented_objects(module_name: str):
                     yield f"{module_name}.{name}.{member_name}", member, "property"
                 elif inspect.isfunction(member):
                     yield f"{module_name}.{name}.{member_name}", member, "function"
-        elif inspect.isfunction(obj) and _own(obj):
+        elif inspect.isfunction(obj) and defined_here(obj):
             yield f"{module_name}.{name}", obj, "function"
 
 

@@ -28,6 +28,13 @@ from validation.boundary import Clamp
 from volspring.material import Material
 from volspring.regions import Region, describe_bounds
 from volspring.regions import parse_region as parse_region_text
+from collections.abc import Callable
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from validation.boundary import Traction
+    from numpy.typing import ArrayLike
 
 __all__ = ["CLAMP_TOLERANCE", "check_held", "own_mesh_case", "parse_region"]
 
@@ -63,7 +70,8 @@ def parse_region(text: str, mesh: TetMesh) -> Region:
     return parse_region_text(text, tolerance=CLAMP_TOLERANCE * size)
 
 
-def own_mesh_case(mesh: TetMesh, clamp, *, material: Material, gravity=(0.0, 0.0, -9.81), tractions=(),
+def own_mesh_case(mesh: TetMesh, clamp: Callable[[np.ndarray], np.ndarray], *, material: Material,
+                  gravity: ArrayLike = (0.0, 0.0, -9.81), tractions: Sequence[Traction] = (),
                   source: str = "mesh") -> Case:
     """Any tet mesh with a clamp region and loads.
 

@@ -33,6 +33,11 @@ import numpy as np
 
 from meshing.geometry import rigid_body_modes
 from volspring.regions import Box  # re-exported: validation.Box and validation.boundary.Box keep working
+from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.mesh import TetMesh
 
 __all__ = [
     "Box",
@@ -134,7 +139,7 @@ def _clamps(clamp) -> list:
     return [Clamp(clamp)]
 
 
-def evaluate_vectors(value, points: np.ndarray) -> np.ndarray:
+def evaluate_vectors(value: Any, points: np.ndarray) -> np.ndarray:
     """A constant (3,) vector or a callable on (k, 3) points, as (k, 3) values."""
     if callable(value):
         values = np.asarray(value(points), dtype=float)
@@ -155,7 +160,7 @@ class FixedDofs:
     edge_values: np.ndarray  # (e, 3) float [m], at the edge midpoints
 
 
-def resolve_clamps(mesh, clamp) -> FixedDofs:
+def resolve_clamps(mesh: TetMesh, clamp: Any) -> FixedDofs:
     """The dofs a clamp (a region, a :class:`Clamp` or a list of them) fixes on ``mesh``, and their values.
 
     Raises
@@ -203,7 +208,7 @@ def _check_rigid_modes(points: np.ndarray, node_mask: np.ndarray) -> None:
                          f"r = rotation about an axis): {modes}; the stiffness matrix is singular, clamp more")
 
 
-def resolve_tractions(mesh, traction) -> list:
+def resolve_tractions(mesh: TetMesh, traction: Any) -> list:
     """[(faces (k, 3) int, vector (3,) float [Pa]), ...] -- the boundary faces each traction loads."""
     if traction is None:
         return []
@@ -223,7 +228,7 @@ def resolve_tractions(mesh, traction) -> list:
     return loaded
 
 
-def resolve_point_loads(mesh, point_loads) -> np.ndarray:
+def resolve_point_loads(mesh: TetMesh, point_loads: Any) -> np.ndarray:
     """(n, 3) float nodal forces [N] from an (n, 3) array or a mapping {node: (3,) force}."""
     forces = np.zeros((mesh.node_count, 3))
     if point_loads is None:

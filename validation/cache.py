@@ -42,6 +42,11 @@ import volspring
 from meshing._io import atomic_path
 from meshing import tolerances
 from validation import boundary, fem, fem_solvers
+from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.mesh import TetMesh
 
 __all__ = ["cache_key", "cached_solve_modes", "cached_solve_static", "default_folder"]
 
@@ -77,8 +82,8 @@ def _code_version() -> bytes:
                                                      for module in REFERENCE_MODULES)
 
 
-def cache_key(kind: str, mesh, material, *, clamp, gravity=None, traction=None, point_loads=None,
-              element: str = "P2", **options) -> str:
+def cache_key(kind: str, mesh: TetMesh, material: Any, *, clamp: Any, gravity: Any = None, traction: Any = None,
+              point_loads: Any = None, element: str = "P2", **options: Any) -> str:
     """The hex SHA-256 naming one reference.
 
     Parameters
@@ -165,7 +170,8 @@ def _cached(kind, solve, cls, mesh, material, folder, arguments):
     return solution
 
 
-def cached_solve_static(mesh, material, *, folder=None, **arguments) -> fem.StaticSolution:
+def cached_solve_static(mesh: TetMesh, material: Any, *, folder: str | os.PathLike[str] | None = None,
+                        **arguments: Any) -> fem.StaticSolution:
     """:func:`validation.fem.solve_fem_static`, read from ``folder`` when solved before (same key).
 
     Parameters
@@ -183,7 +189,8 @@ def cached_solve_static(mesh, material, *, folder=None, **arguments) -> fem.Stat
     return _cached("static", fem.solve_fem_static, fem.StaticSolution, mesh, material, folder, arguments)
 
 
-def cached_solve_modes(mesh, material, *, folder=None, **arguments) -> fem.ModalSolution:
+def cached_solve_modes(mesh: TetMesh, material: Any, *, folder: str | os.PathLike[str] | None = None,
+                       **arguments: Any) -> fem.ModalSolution:
     """:func:`validation.fem.solve_fem_modes`, read from ``folder`` when solved before (same key)."""
     arguments = {"count": 6, "element": "P2", "mass": "consistent"} | arguments  # defaults, so they hash alike
     return _cached("modes", fem.solve_fem_modes, fem.ModalSolution, mesh, material, folder, arguments)

@@ -59,6 +59,10 @@ from validation.heldout import HELDOUT_CASE_NAMES, build_heldout_case
 from validation.boundary import Clamp, Traction
 from volspring.material import Material
 from volspring.regions import Box
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = [
     "BEAM",
@@ -190,7 +194,7 @@ def uniaxial_compression(*, cells: int = 4, nu: float = 0.3, strain: float = CUB
                 cells=(cells, cells, cells))
 
 
-def beam_deflection_profile(case: Case, x) -> np.ndarray:
+def beam_deflection_profile(case: Case, x: ArrayLike) -> np.ndarray:
     """Timoshenko beam deflection w(x) [m] of a cantilever case along its axis (positive along the load).
 
     Self-weight q = rho g A: w = q (x^4 - 4 L x^3 + 6 L^2 x^2) / (24 E I) + q (L x - x^2 / 2) / (kappa G A);

@@ -46,6 +46,7 @@ import numpy as np
 from meshing._command_line import (EXIT_DIVERGED, EXIT_DONE, EXIT_FAILED, EXIT_USAGE, Parser, UsageError,
                                    add_common_options, advance_to, error_line, progress_bar, progress_mode)
 from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
+from collections.abc import Sequence
 
 __all__ = ["main"]
 
@@ -193,7 +194,7 @@ def _error(error, status: int) -> int:
     return error_line(PROG, error, status)
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run ``volspring validate`` (``volspring-validate``); returns the exit status (module docstring)."""
     try:
         args = _parser().parse_args(argv)

@@ -27,6 +27,14 @@ from validation import cache
 from validation.cases import Case
 from validation.springs import (VALIDATED_MODELS, deformed_volume_change, rung_model_or_refusal, spring_frequencies,
                                spring_model, spring_static)
+from typing import Any
+from collections.abc import Callable
+from collections.abc import Sequence
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = [
     "LADDER_RULE",
@@ -47,7 +55,8 @@ LADDER_RULE = "van_gelder"
 
 
 # ---------------------------------------------------------------------------- measures
-def tip_deflection(case: Case, displacement: np.ndarray, *, nodes=None, direction=None) -> float:
+def tip_deflection(case: Case, displacement: np.ndarray, *, nodes: np.ndarray | None = None,
+                   direction: ArrayLike | None = None) -> float:
     """Mean displacement of the case's tip nodes along its tip direction [m]."""
     nodes = case.tip_nodes if nodes is None else nodes
     direction = case.tip_direction if direction is None else direction
@@ -133,8 +142,9 @@ def _answers(case: Case, rules, models, note, answer) -> dict:
     return answers
 
 
-def compare_static(case: Case, *, rules=RULES, models=(), elements=("P2", "P1"), folder=None,
-                   progress=None) -> Comparison:
+def compare_static(case: Case, *, rules: Sequence[str] = RULES, models: Sequence[str] = (),
+                   elements: Sequence[str] = ("P2", "P1"), folder: str | os.PathLike[str] | None = None,
+                   progress: Callable[..., Any] | None = None) -> Comparison:
     """Springs (each rule) and the ladder's rungs against the FEM reference (P2) and P1 on the case's mesh.
 
     Parameters
@@ -237,7 +247,9 @@ def _beam_theory(case, stations):
     return beam_deflection_profile(case, stations).tolist()
 
 
-def compare_modes(case: Case, *, rules=RULES, models=(), count: int = 4, folder=None, progress=None) -> Comparison:
+def compare_modes(case: Case, *, rules: Sequence[str] = RULES, models: Sequence[str] = (), count: int = 4,
+                  folder: str | os.PathLike[str] | None = None,
+                  progress: Callable[..., Any] | None = None) -> Comparison:
     """Frequencies of the spring model (each rule) and of the ladder's rungs (``models``, as for
     :func:`compare_static`) against the FEM P2 modal solve and beam theory."""
     note = progress or (lambda message: None)

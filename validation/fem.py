@@ -66,6 +66,12 @@ from validation.boundary import resolve_clamps, resolve_point_loads, resolve_tra
 from validation.fem_assembly import (ELEMENTS, check_element, fixed_vector, load_vector, mass_matrix, mixed_matrices,
                                      p1_prolongation, pressure_basis, skfem_space, fem_stiffness_matrix)
 from validation.fem_solvers import AMG_TOLERANCE, ReferenceInfo, solve_linear, solve_saddle_point
+from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.mesh import TetMesh
+    from validation.boundary import Traction
 
 __all__ = [
     "ModalSolution",
@@ -80,7 +86,7 @@ logger = logging.getLogger(__name__)
 
 
 # ---------------------------------------------------------------------------- inputs
-def elastic_constants(material) -> tuple[float, float, float]:
+def elastic_constants(material: Any) -> tuple[float, float, float]:
     """Young's modulus, Poisson ratio and density of a material, checked.
 
     Parameters
@@ -153,8 +159,10 @@ class StaticSolution:
     info: ReferenceInfo
 
 
-def solve_fem_static(mesh, material, *, clamp, gravity=None, traction=None, point_loads=None, body_force=None,
-                 element: str = "P2", solver: str = "auto", tolerance: float = AMG_TOLERANCE) -> StaticSolution:
+def solve_fem_static(mesh: TetMesh, material: Any, *, clamp: Any, gravity: np.ndarray | None = None,
+                     traction: Traction | list[Traction] | None = None, point_loads: np.ndarray | str | None = None,
+                     body_force: Callable[[np.ndarray], np.ndarray] | None = None, element: str = "P2",
+                     solver: str = "auto", tolerance: float = AMG_TOLERANCE) -> StaticSolution:
     """Linear-elastic static displacement of a clamped tet mesh under loads.
 
     Parameters
@@ -298,8 +306,8 @@ class ModalSolution:
     info: ReferenceInfo
 
 
-def solve_fem_modes(mesh, material, *, clamp, count: int = 6, element: str = "P2",
-                mass: str = "consistent") -> ModalSolution:
+def solve_fem_modes(mesh: TetMesh, material: Any, *, clamp: Any, count: int = 6, element: str = "P2",
+                    mass: str = "consistent") -> ModalSolution:
     """Lowest eigenfrequencies of a clamped tet mesh (scipy ``eigsh``, shift-invert about 0).
 
     Parameters
@@ -401,7 +409,8 @@ def _check_taylor_hood_nu(element, E, nu):
 
 
 # ---------------------------------------------------------------------------- error norms
-def error_norms(mesh, solution: StaticSolution, displacement: Callable, gradient: Callable) -> tuple[float, float]:
+def error_norms(mesh: TetMesh, solution: StaticSolution, displacement: Callable,
+                gradient: Callable) -> tuple[float, float]:
     """L2 and H1-seminorm error of a finite-element solution against an exact field.
 
     Parameters

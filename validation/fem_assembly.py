@@ -37,6 +37,14 @@ from skfem.helpers import ddot, div, dot, sym_grad
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from validation.boundary import FixedDofs, evaluate_vectors
+from typing import Any
+from collections.abc import Callable
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.mesh import TetMesh
+    from numpy.typing import ArrayLike
 
 __all__ = [
     "DISPLACEMENT_ELEMENTS",
@@ -107,7 +115,7 @@ class Space:
         return Basis(self.basis.mesh, self.basis.elem, intorder=intorder)
 
 
-def skfem_space(mesh, element: str) -> Space:
+def skfem_space(mesh: TetMesh, element: str) -> Space:
     """The vector displacement space of ``element`` ("P1", "P2", or "TH": P2) on a TetMesh, its dofs located."""
     # The only place where the (n, 3) points become scikit-fem's (3, n).
     skmesh = MeshTet(np.ascontiguousarray(mesh.points.T), np.ascontiguousarray(mesh.tets.T))
@@ -194,7 +202,9 @@ def mass_matrix(space: Space, density: float) -> sp.csr_matrix:
     return asm(BilinearForm(lambda u, v, w: density * dot(u, v)), space.with_intorder(2 * space.order)).tocsr()
 
 
-def load_vector(space: Space, density, gravity, body_force, tractions, point_forces) -> np.ndarray:
+def load_vector(space: Space, density: float, gravity: ArrayLike | None,
+                body_force: Callable[[np.ndarray], np.ndarray] | None, tractions: Sequence[Any],
+                point_forces: np.ndarray | None) -> np.ndarray:
     """(N,) float -- consistent nodal forces [N] of gravity [m/s^2], a body force callable [N/m^3], the
     resolved tractions (:func:`validation.boundary.resolve_tractions`) and (n, 3) point forces [N]."""
     basis = space.basis
@@ -220,7 +230,7 @@ def load_vector(space: Space, density, gravity, body_force, tractions, point_for
     return load
 
 
-def p1_prolongation(mesh, space: Space) -> sp.csr_matrix:
+def p1_prolongation(mesh: TetMesh, space: Space) -> sp.csr_matrix:
     """(N, N) float -- P1 interpolation into the P2 space: vertex dofs map to themselves, an edge dof
     takes the mean of its two end nodes. Only the columns of vertex dofs are non-zero."""
     edge_rows = space.edge_dofs.ravel()

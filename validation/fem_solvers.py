@@ -46,6 +46,10 @@ import scipy.sparse.linalg as spla
 
 from volspring.errors import SolverNotConverged
 from volspring.solvers import AMGConjugateGradient, SolveInfo
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from scipy import sparse
 
 __all__ = ["AMG_MAXITER", "AMG_STRENGTH_THETA", "AMG_TOLERANCE", "DIRECT_BACKWARD_ERROR", "DIRECT_DOF_LIMIT",
            "DIRECT_REFINEMENT_STEPS", "DIRECT_TOLERANCE", "ReferenceInfo", "solve_direct", "solve_linear", "solve_saddle_point"]
@@ -105,7 +109,8 @@ class ReferenceInfo(SolveInfo):
     assemble_seconds: float = 0.0
 
 
-def solve_linear(K, rhs, *, solver, tolerance, rigid_modes, prolongation=None) -> tuple[np.ndarray, SolveInfo]:
+def solve_linear(K: sparse.spmatrix, rhs: np.ndarray, *, solver: str, tolerance: float, rigid_modes: np.ndarray | None,
+                 prolongation: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolveInfo]:
     """Solve the condensed SPD system K u = rhs.
 
     Parameters
@@ -146,7 +151,8 @@ def solve_linear(K, rhs, *, solver, tolerance, rigid_modes, prolongation=None) -
     return u, dataclasses.replace(info, residual=float(np.linalg.norm(rhs - K @ u) / norm))
 
 
-def solve_direct(K, rhs, *, refinement_steps: int = DIRECT_REFINEMENT_STEPS) -> tuple[np.ndarray, SolveInfo]:
+def solve_direct(K: sparse.spmatrix, rhs: np.ndarray, *,
+                 refinement_steps: int = DIRECT_REFINEMENT_STEPS) -> tuple[np.ndarray, SolveInfo]:
     """Sparse LU solve of K u = rhs, refined with the same factors, its residual checked.
 
     Parameters
@@ -214,7 +220,7 @@ def solve_direct(K, rhs, *, refinement_steps: int = DIRECT_REFINEMENT_STEPS) -> 
                         time.perf_counter() - factorised)
 
 
-def solve_saddle_point(K, rhs, *, solver: str = "auto") -> tuple[np.ndarray, SolveInfo]:
+def solve_saddle_point(K: sparse.spmatrix, rhs: np.ndarray, *, solver: str = "auto") -> tuple[np.ndarray, SolveInfo]:
     """Solve a condensed symmetric indefinite system (the Taylor-Hood u-p system) by sparse LU.
 
     Parameters

@@ -51,6 +51,15 @@ from validation.cases import CUBE, uniaxial_compression
 from validation.compare import LADDER_RULE, compare_modes, compare_static
 from validation.springs import VALIDATED_MODELS, case_scene, effective_constants, rung_model_or_refusal
 from volspring.material import Material
+from typing import Any
+from collections.abc import Callable
+from collections.abc import Sequence
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from validation._case import Case
+    from validation.compare import Comparison
 
 __all__ = ["FRAME_STEP_S", "FREQUENCY_COUNT", "LADDER_NUS", "STATIC_REFERENCE", "STEP_COUNT", "WARMUP_STEPS",
            "case_rows",
@@ -75,7 +84,7 @@ STATIC_REFERENCE = ("TH", "P2")
 LADDER_NUS = (0.1, 0.3, 0.45, 0.49)
 
 
-def parse_models(text) -> tuple:
+def parse_models(text: str) -> tuple:
     """Rungs from ``"NAME[,NAME...]"`` (or a sequence of names), in the ladder's order, each once.
 
     Raises
@@ -101,7 +110,8 @@ def _nu_key(nu: float) -> str:
     return f"{float(nu):g}"
 
 
-def rung_constants(models=VALIDATED_MODELS, nus=LADDER_NUS, *, cells: int = 4, strain: float = 1e-3) -> dict:
+def rung_constants(models: Sequence[str] = VALIDATED_MODELS, nus: Sequence[float] = LADDER_NUS, *, cells: int = 4,
+                   strain: float = 1e-3) -> dict:
     """Effective E and nu of each rung on the unit cube of the uniaxial case, for each asked nu.
 
     Parameters
@@ -136,8 +146,8 @@ def rung_constants(models=VALIDATED_MODELS, nus=LADDER_NUS, *, cells: int = 4, s
     return table
 
 
-def step_costs(case, models=VALIDATED_MODELS, *, dt: float = FRAME_STEP_S, steps: int = STEP_COUNT,
-               warmup: int = WARMUP_STEPS) -> dict:
+def step_costs(case: Case, models: Sequence[str] = VALIDATED_MODELS, *, dt: float = FRAME_STEP_S,
+               steps: int = STEP_COUNT, warmup: int = WARMUP_STEPS) -> dict:
     """Cost of one implicit step of each rung on the case's scene, and the size of its matrix.
 
     The scene is the case's supports and loads (:func:`validation.springs.case_scene`), with gravity
@@ -203,7 +213,7 @@ def step_costs(case, models=VALIDATED_MODELS, *, dt: float = FRAME_STEP_S, steps
     return {rung: costs[rung] for rung in models}
 
 
-def case_rows(comparison, costs: dict) -> list:
+def case_rows(comparison: Comparison, costs: dict) -> list:
     """One ladder row per rung of a comparison made with ``models=`` (:mod:`validation.compare`).
 
     Parameters
@@ -250,9 +260,9 @@ def case_rows(comparison, costs: dict) -> list:
     return rows
 
 
-def run_ladder(cases=(), *, comparisons=(), models=VALIDATED_MODELS, folder=None, cells: int = 4,
-               dt: float = FRAME_STEP_S,
-               steps: int = STEP_COUNT, progress=None) -> dict:
+def run_ladder(cases: Sequence[Case] = (), *, comparisons: Sequence[Comparison] = (),
+               models: Sequence[str] = VALIDATED_MODELS, folder: str | os.PathLike[str] | None = None, cells: int = 4,
+               dt: float = FRAME_STEP_S, steps: int = STEP_COUNT, progress: Callable[..., Any] | None = None) -> dict:
     """The ladder table: every rung on every case, with the rungs' effective constants.
 
     Parameters

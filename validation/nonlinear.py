@@ -61,6 +61,12 @@ from validation.fem import elastic_constants
 from validation.fem_assembly import check_element, fixed_vector, load_vector, skfem_space
 from volspring.errors import SolverNotConverged
 from volspring.solvers import DirectSolver
+from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.mesh import TetMesh
 
 __all__ = [
     "NonlinearSolution",
@@ -92,20 +98,20 @@ def _identity_like(A):
     return eye
 
 
-def neo_hookean_density(F, mu: float, lam: float):
+def neo_hookean_density(F: np.ndarray, mu: float, lam: float) -> np.ndarray:
     """psi(F) [J/m^3] of (3, 3, ...) deformation gradients (leading axes: the tensor; J must be > 0)."""
     J = det(F)
     return 0.5 * mu * (ddot(F, F) - 3.0) - mu * np.log(J) + 0.5 * lam * (J - 1.0) ** 2
 
 
-def neo_hookean_stress(F, mu: float, lam: float):
+def neo_hookean_stress(F: np.ndarray, mu: float, lam: float) -> np.ndarray:
     """P(F) = d psi / dF [Pa], the first Piola-Kirchhoff stress, of (3, 3, ...) deformation gradients."""
     J = det(F)
     H = transpose(inv(F))
     return mu * (F - H) + lam * J * (J - 1.0) * H
 
 
-def neo_hookean_tangent(F, dF, mu: float, lam: float):
+def neo_hookean_tangent(F: np.ndarray, dF: np.ndarray, mu: float, lam: float) -> np.ndarray:
     """dP[dF] [Pa], the exact derivative of :func:`neo_hookean_stress` at F in the direction dF (module docstring)."""
     J = det(F)
     H = transpose(inv(F))
@@ -179,16 +185,16 @@ class NonlinearSolution:
     residual: float
     seconds: float
 
-    def reaction_in(self, region) -> np.ndarray:
+    def reaction_in(self, region: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
         """(3,) float -- the total force [N] of the clamped dofs located in ``region`` (a callable on (k, 3)
         points, e.g. :class:`~validation.boundary.Box`): the reaction on one clamped face."""
         inside = np.asarray(region(self.dof_locations), dtype=bool)
         return np.bincount(self.dof_components[inside], weights=self.reactions[inside], minlength=3)
 
 
-def solve_neo_hookean_static(mesh, material, *, clamp, gravity=None, traction=None, point_loads=None,
-                             element: str = "P2", load_steps: int = 4, rtol: float = 1e-10,
-                             max_iterations: int = 30) -> NonlinearSolution:
+def solve_neo_hookean_static(mesh: TetMesh, material: Any, *, clamp: Any, gravity: np.ndarray | None = None,
+                             traction: Any = None, point_loads: Any = None, element: str = "P2", load_steps: int = 4,
+                             rtol: float = 1e-10, max_iterations: int = 30) -> NonlinearSolution:
     """Finite-strain static displacement of a clamped tet mesh, Neo-Hookean (module docstring).
 
     Parameters

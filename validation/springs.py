@@ -53,6 +53,8 @@ from volspring.modes import solve_modes
 from volspring.scene import Scene
 from volspring.statics import solve_static
 from volspring.supports import Pins, Prescribed
+from typing import Any
+from collections.abc import Sequence
 
 __all__ = [
     "VALIDATED_MODELS",
@@ -84,7 +86,7 @@ def uniform_stiffness(mesh: TetMesh, material: Material) -> float:
     return float(Model.from_mesh(mesh, material, rule="van_gelder").stiffness.mean())
 
 
-def spring_model(mesh: TetMesh, material: Material, rule: str, **options) -> Model:
+def spring_model(mesh: TetMesh, material: Material, rule: str, **options: Any) -> Model:
     """The spring model of ``mesh`` by ``rule`` (``uniform``: :func:`uniform_stiffness`); options go to
     :meth:`Model.from_mesh` (e.g. ``damping_ratio``)."""
     if rule == "uniform":
@@ -97,7 +99,7 @@ def spring_model(mesh: TetMesh, material: Material, rule: str, **options) -> Mod
 VALIDATED_MODELS = MODELS + ("lattice",)
 
 
-def rung_model(mesh: TetMesh, material: Material, rung: str, **options) -> Model:
+def rung_model(mesh: TetMesh, material: Material, rung: str, **options: Any) -> Model:
     """The model of ``mesh`` on a rung of the ladder (:data:`volspring.ladder.MODELS`), by
     :meth:`Model.from_mesh` itself (the springs rung with volspring's default rule, van Gelder), or
     ``"lattice"``: the lattice body on the same nodes (:func:`volspring.lattice.box_lattice_model`), the
@@ -127,7 +129,7 @@ def rung_model_or_refusal(mesh: TetMesh, material: Material, rung: str) -> Model
         return " ".join(str(refusal).split())
 
 
-def traction_forces(mesh: TetMesh, tractions) -> np.ndarray:
+def traction_forces(mesh: TetMesh, tractions: Sequence[Any]) -> np.ndarray:
     """(n, 3) float -- node forces [N] of uniform tractions: each loaded boundary face gives a third
     of its area times the traction to each of its nodes (the consistent P1 load).
 
@@ -176,7 +178,7 @@ def held_nodes(case: Case) -> np.ndarray | None:
     return held
 
 
-def case_supports(mesh: TetMesh, clamps) -> tuple:
+def case_supports(mesh: TetMesh, clamps: Any) -> tuple:
     """The clamps of a case as volspring supports, one per distinct set of held components.
 
     Nodes held in all components at rest become :class:`~volspring.Pins`; the rest (sliding,

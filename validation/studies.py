@@ -38,6 +38,14 @@ from validation.cases import cantilever_gravity
 from validation.compare import RULES, tip_deflection
 from validation.springs import effective_constants, held_nodes, spring_frequencies, spring_model, spring_static
 from volspring.material import Material
+from typing import Any
+from collections.abc import Callable
+from collections.abc import Sequence
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["INTEGRATOR_STEPS", "QUICK_INTEGRATOR_STEPS", "cauchy_study", "fit_rate", "pareto_front", "refinement_study", "speed_study"]
 
@@ -70,7 +78,7 @@ QUICK_INTEGRATOR_STEPS = {
 }
 
 
-def fit_rate(node_counts, errors) -> float | None:
+def fit_rate(node_counts: ArrayLike, errors: ArrayLike) -> float | None:
     """Slope of log|error| against log(node count) by least squares, or None with < 2 usable points."""
     n, e = np.asarray(node_counts, float), np.abs(np.asarray(errors, float))
     keep = (e > 0) & np.isfinite(e)
@@ -79,8 +87,8 @@ def fit_rate(node_counts, errors) -> float | None:
     return float(np.polyfit(np.log(n[keep]), np.log(e[keep]), 1)[0])
 
 
-def refinement_study(levels=(1, 2, 4), *, reference_level: int = 8, rules=RULES, folder=None,
-                     progress=None) -> dict:
+def refinement_study(levels: Sequence[int] = (1, 2, 4), *, reference_level: int = 8, rules: Sequence[str] = RULES,
+                     folder: str | os.PathLike[str] | None = None, progress: Callable[..., Any] | None = None) -> dict:
     """Tip deflection error of the gravity cantilever against node count.
 
     Parameters
@@ -192,7 +200,7 @@ def _trajectory_frequency(times, tip, settled, drag_rate) -> float | None:
     return math.sqrt(omega_damped**2 + drag_rate**2 / 4.0) / (2.0 * math.pi)
 
 
-def pareto_front(times, errors) -> list:
+def pareto_front(times: ArrayLike, errors: ArrayLike) -> list:
     """Indices of the points not dominated in (time, error), both to be minimised, by ascending time."""
     times, errors = np.asarray(times, float), np.asarray(errors, float)
     keep = np.flatnonzero(np.isfinite(times) & np.isfinite(errors))
@@ -204,9 +212,10 @@ def pareto_front(times, errors) -> list:
     return front
 
 
-def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps=None, periods: float = 5.0,
-                duration: float | None = None, residual_amplitude: float = 5e-5, drag_rate: float | None = None,
-                frame_dt: float = 1e-3, folder=None, progress=None) -> dict:
+def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps: dict[str, Any] | None = None,
+                periods: float = 5.0, duration: float | None = None, residual_amplitude: float = 5e-5,
+                drag_rate: float | None = None, frame_dt: float = 1e-3, folder: str | os.PathLike[str] | None = None,
+                progress: Callable[..., Any] | None = None) -> dict:
     """Wall time against accuracy for every integrator over a range of steps (module docstring).
 
     Parameters
@@ -340,8 +349,8 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps=None, pe
             "runs": runs}
 
 
-def cauchy_study(*, cells: int = 4, rules=RULES, nus=(0.0, 0.25, 0.3, 0.45, 0.49), E: float = 1e6,
-                 strain: float = 1e-3, patterns=("mirrored", "kuhn")) -> dict:
+def cauchy_study(*, cells: int = 4, rules: Sequence[str] = RULES, nus: Sequence[float] = (0.0, 0.25, 0.3, 0.45, 0.49),
+                 E: float = 1e6, strain: float = 1e-3, patterns: Sequence[str] = ("mirrored", "kuhn")) -> dict:
     """Effective elastic constants of the spring network of a unit cube, per rule, pattern and asked nu.
 
     Parameters

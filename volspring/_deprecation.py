@@ -16,6 +16,8 @@ Every rename is recorded in CHANGELOG.md.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
+from typing import Any
 
 __all__ = ["deprecated_alias", "warn_deprecated"]
 
@@ -58,7 +60,7 @@ def warn_deprecated(old: str, new_path: str, *, stacklevel: int = 3) -> None:
                   DeprecationWarning, stacklevel=stacklevel)
 
 
-def moved_names(module: str, new_module: str, names) -> callable:
+def moved_names(module: str, new_module: str, names) -> Callable[[str], Any]:
     """A module ``__getattr__`` for names that moved to ``new_module`` (warning once per access)."""
     import importlib
 

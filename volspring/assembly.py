@@ -32,6 +32,13 @@ import scipy.sparse as sp
 from volspring._deprecation import deprecated_alias
 from volspring.elements.base import BlockMap
 from volspring.errors import SpringCollapsed
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from scipy import sparse
+    from volspring.model import Model
+    from scipy.sparse.linalg import LinearOperator
 
 __all__ = ["BlockPattern", "ModelLinearization", "eliminate_held", "held_unknowns", "stiffness_matrix"]
 
@@ -87,7 +94,7 @@ class ModelLinearization:
     parts: tuple
 
     @property
-    def blocks(self):
+    def blocks(self) -> np.ndarray:
         """The blocks of a model with one element set (its layout; see :class:`Linearization`)."""
         if len(self.parts) != 1:
             raise ValueError(f"the model has {len(self.parts)} element sets; use the parts' blocks")
@@ -136,7 +143,8 @@ class BlockPattern:
     array([ 3.,  0.,  0., -1.])
     """
 
-    def __init__(self, model, free=None, *, ordering="rcm", matrix_free=False):
+    def __init__(self, model: Model, free: np.ndarray | None = None, *, ordering: str = "rcm",
+                 matrix_free: bool = False):
         n = model.node_count
         free = np.ones(n, dtype=bool) if free is None else np.asarray(free, dtype=bool)
         if free.shape != (n,):
@@ -248,7 +256,8 @@ class BlockPattern:
         return len(self.free_nodes)
 
     # ------------------------------------------------------------------ evaluation
-    def linearize(self, x, v=None, *, stiffness_scale, damping_scale=0.0, clamp_compression=True):
+    def linearize(self, x: np.ndarray, v: np.ndarray | None = None, *, stiffness_scale: float,
+                  damping_scale: float = 0.0, clamp_compression: bool = True) -> ModelLinearization:
         """Forces and blocks c_K K + c_D C of every element set at (x, v), ready for :meth:`data`.
 
         Parameters
@@ -291,7 +300,7 @@ class BlockPattern:
             parts.append(linearization)
         return ModelLinearization(forces, tuple(parts))
 
-    def dfdx_times(self, linearization, u) -> np.ndarray:
+    def dfdx_times(self, linearization: ModelLinearization | np.ndarray, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- dF/dx @ u of all element sets at a linearization [N]."""
         out = np.zeros((self.model.node_count, 3))
         for part, lin in zip(self.parts, linearization.parts):
@@ -301,7 +310,8 @@ class BlockPattern:
                 out += lin.dfdx_times(u)
         return out
 
-    def data(self, linearization, diagonal=None, *, out=None, preconditioner=False) -> np.ndarray:
+    def data(self, linearization: ModelLinearization | np.ndarray, diagonal: np.ndarray | None = None, *,
+             out: np.ndarray | None = None, preconditioner: bool = False) -> np.ndarray:
         """The BSR data array, (nnzb, 3, 3), for the given blocks.
 
         Parameters
@@ -342,12 +352,13 @@ class BlockPattern:
             return out
         return data
 
-    def matrix(self, linearization, diagonal=None, *, preconditioner=False) -> sp.bsr_matrix:
+    def matrix(self, linearization: ModelLinearization | np.ndarray, diagonal: np.ndarray | None = None, *,
+               preconditioner: bool = False) -> sp.bsr_matrix:
         """(3f, 3f) BSR matrix with block size 3 sharing this pattern's index arrays (``preconditioner``:
         see :meth:`data`)."""
         return self.wrap(self.data(linearization, diagonal, preconditioner=preconditioner))
 
-    def operator(self, linearization):
+    def operator(self, linearization: ModelLinearization) -> LinearOperator:
         """The sets applied as products, over the free unknowns: a ``scipy.sparse.linalg.LinearOperator``
         p -> (c_K K + c_D C) p (None when every set is assembled). The system is ``matrix + operator``."""
         from scipy.sparse.linalg import LinearOperator
@@ -367,12 +378,12 @@ class BlockPattern:
 
         return LinearOperator((self.size, self.size), matvec=times, rmatvec=times, dtype=np.float64)
 
-    def wrap(self, data) -> sp.bsr_matrix:
+    def wrap(self, data: np.ndarray) -> sp.bsr_matrix:
         """A BSR matrix around a data array of this pattern (no copy, no format check)."""
         matrix = sp.bsr_matrix((data, self.indices, self.indptr), shape=(self.size, self.size), copy=False)
         return matrix
 
-    def restrict(self, vectors) -> np.ndarray:
+    def restrict(self, vectors: np.ndarray) -> np.ndarray:
         """(3f,) float -- the free nodes' rows of a per-node array (n, 3), flattened."""
         return np.ascontiguousarray(vectors[self.free_nodes]).ravel()
 
@@ -380,7 +391,7 @@ class BlockPattern:
         """(3f,) int -- model unknown index (3 node + component) of every free unknown."""
         return (3 * self.free_nodes[:, None] + np.arange(3)).ravel()
 
-    def boundary_coupling(self, linearization, prescribed) -> np.ndarray:
+    def boundary_coupling(self, linearization: ModelLinearization | np.ndarray, prescribed: np.ndarray) -> np.ndarray:
         """(n, 3) float -- -A_fp u_p: what prescribed values on fixed nodes add to the right-hand side.
 
         Parameters
@@ -415,7 +426,8 @@ class BlockPattern:
         return out
 
 
-def stiffness_matrix(model, x=None, *, free=None, clamp_compression=True) -> sp.csr_matrix:
+def stiffness_matrix(model: Model, x: np.ndarray | None = None, *, free: np.ndarray | None = None,
+                     clamp_compression: bool = True) -> sp.csr_matrix:
     """(3f, 3f) CSR -- the stiffness K = -dF/dx of all element sets over the free nodes' dofs [N/m].
 
     Free node k (in the order of ``np.flatnonzero(free)``) owns dofs 3 k, 3 k + 1, 3 k + 2; the
@@ -444,13 +456,14 @@ def stiffness_matrix(model, x=None, *, free=None, clamp_compression=True) -> sp.
 
 
 
-def held_unknowns(pattern, held) -> np.ndarray:
+def held_unknowns(pattern: BlockPattern, held: ArrayLike) -> np.ndarray:
     """(3f,) bool -- which free unknowns of ``pattern`` a support holds (``held``: (n, 3) bool, as
     :attr:`volspring.Scene.held`); all False when only whole nodes are held."""
     return np.ascontiguousarray(held[pattern.free_nodes]).ravel()
 
 
-def eliminate_held(pattern, matrix, held, *, extra=None):
+def eliminate_held(pattern: BlockPattern, matrix: sparse.spmatrix, held: np.ndarray, *,
+                   extra: sparse.spmatrix | None = None) -> tuple[sparse.spmatrix, np.ndarray, sparse.spmatrix | None]:
     """Decouple held unknowns from the system, symmetrically and in place: A' = P A P + (I - P) D.
 
     Rows and columns of the held unknowns (components of partly held nodes: sliding, prescribed

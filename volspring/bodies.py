@@ -52,6 +52,11 @@ from meshing.tolerances import ORTHONORMAL
 from meshing.topology import SpringTopology
 from volspring.elements import Springs
 from volspring.material import Material, _shown
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.model import Model
 
 __all__ = ["Body", "initial_velocities"]
 
@@ -302,7 +307,7 @@ def assemble(model_class, bodies):
 
 
 # ---------------------------------------------------------------------- initial conditions
-def initial_velocities(bodies, model) -> np.ndarray:
+def initial_velocities(bodies: Sequence[Body], model: Model) -> np.ndarray:
     """(n, 3) float -- the bodies' initial velocities at every node of their model [m/s].
 
     Node i of body b moves with ``velocity_b + angular_velocity_b x (x_i - c_b)``, c_b the body's

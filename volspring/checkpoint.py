@@ -43,6 +43,12 @@ import numpy as np
 
 from meshing._io import atomic_path, interruptions_first
 from volspring.scene import State
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.integrators.base import Integrator
+    from volspring.scene import Scene
 
 __all__ = ["save_checkpoint", "load_checkpoint", "CheckpointMismatch", "model_fingerprint"]
 
@@ -74,7 +80,7 @@ class CheckpointMismatch(ValueError):
 _SEPARATOR = "/"
 
 
-def model_fingerprint(scene) -> dict:
+def model_fingerprint(scene: Scene) -> dict:
     """Short SHA-256 digests of everything that makes a scene's model and supports what they are.
 
     Parameters
@@ -132,7 +138,8 @@ def _integrator_record(integrator) -> dict:
     return {"name": integrator.name, "options": options}
 
 
-def save_checkpoint(path, state: State, *, scene=None, integrator=None, dt=None) -> Path:
+def save_checkpoint(path: str | os.PathLike[str], state: State, *, scene: Scene | None = None,
+                    integrator: Integrator | None = None, dt: float | None = None) -> Path:
     """Save a state (with its integrator memory) to an ``.npz`` file, atomically.
 
     Parameters
@@ -197,7 +204,8 @@ def save_checkpoint(path, state: State, *, scene=None, integrator=None, dt=None)
     return path
 
 
-def load_checkpoint(path, *, scene=None, integrator=None, dt=None) -> State:
+def load_checkpoint(path: str | os.PathLike[str], *, scene: Scene | None = None, integrator: Integrator | None = None,
+                    dt: float | None = None) -> State:
     """Load a state saved by :func:`save_checkpoint`, checking it belongs to the run resuming it.
 
     Parameters

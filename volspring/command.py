@@ -14,8 +14,8 @@ exit statuses (:mod:`meshing._command_line`): 0 done, 1 the run failed, 2 a bad 
 Examples
 --------
 >>> from volspring.command import commands, main
->>> sorted(commands())[:3]
-['mesh', 'sim', 'validate']
+>>> list(commands())  # in help order: along the data path
+['mesh', 'sim', 'validate', 'sweep']
 >>> main(["--version"])  # doctest: +ELLIPSIS
 volspring ...
 0
@@ -28,6 +28,7 @@ import importlib
 import sys
 
 from meshing._command_line import EXIT_DONE, EXIT_FAILED, EXIT_STATUS_EPILOG, EXIT_USAGE, error_line, version_text
+from collections.abc import Sequence
 
 __all__ = ["GROUP", "commands", "main"]
 
@@ -68,7 +69,7 @@ def _help(found) -> str:
             + EXIT_STATUS_EPILOG.replace("PROG", f"{PROG}-COMMAND"))
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run ``volspring COMMAND ...`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
 
     ``COMMAND`` is a subcommand of :func:`commands`, run with the rest of ``argv``; ``--help`` lists them,

@@ -28,6 +28,11 @@ from typing import NamedTuple
 import numpy as np
 
 from volspring.collision.obstacles import HalfSpace  # re-exported: volspring.constraints.HalfSpace keeps working
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from volspring.model import Model
 
 __all__ = ["HalfSpace", "DistanceConstraints", "StrainLimit", "RelaxationReport", "constraint_colors"]
 
@@ -35,7 +40,7 @@ logger = logging.getLogger(__name__)
 
 
 # ---------------------------------------------------------------------------- colouring
-def constraint_colors(pairs, *, node_count=None, seed=0) -> np.ndarray:
+def constraint_colors(pairs: ArrayLike, *, node_count: int | None = None, seed: int = 0) -> np.ndarray:
     """Colour node pairs so that no two pairs of one colour share a node.
 
     Each colour is a maximal matching built by Luby's rounds, vectorised: among the pairs still
@@ -164,13 +169,13 @@ class _PairProjection:
         """Target lengths for current lengths ``length`` and rest lengths ``rest`` [m]."""
         raise NotImplementedError
 
-    def violations(self, x) -> np.ndarray:
+    def violations(self, x: np.ndarray) -> np.ndarray:
         """(s,) float -- relative violation (l - target) / l0 of every constraint at positions x."""
         i, j = self.pairs.T
         length = np.linalg.norm(x[j] - x[i], axis=1)
         return (length - self._targets(length, self.lengths)) / self.lengths
 
-    def relax(self, x, free=None, *, iterations=None) -> RelaxationReport:
+    def relax(self, x: ArrayLike, free: np.ndarray | None = None, *, iterations: int | None = None) -> RelaxationReport:
         """Project x in place: Gauss-Seidel sweeps, colour by colour, until the tolerance is met.
 
         Parameters
@@ -222,7 +227,7 @@ class _PairProjection:
             x[...] = points
         return RelaxationReport(done, violation)
 
-    def project(self, x, v, x_start, t, dt, free) -> None:
+    def project(self, x: np.ndarray, v: np.ndarray, x_start: np.ndarray, t: float, dt: float, free: np.ndarray) -> None:
         before = x.copy()
         report = self.relax(x, free)
         v += (x - before) / dt
@@ -267,11 +272,13 @@ class DistanceConstraints(_PairProjection):
     [[0.1, 0.0, 0.0], [1.1, 0.0, 0.0]]
     """
 
-    def __init__(self, masses, pairs, lengths, *, iterations=10, stiffness=1.0, tolerance=0.0):
+    def __init__(self, masses: ArrayLike, pairs: ArrayLike, lengths: float | ArrayLike, *, iterations: int = 10,
+                 stiffness: float = 1.0, tolerance: float = 0.0):
         super().__init__(masses, pairs, lengths, iterations=iterations, stiffness=stiffness, tolerance=tolerance)
 
     @classmethod
-    def from_model(cls, model, *, springs=None, iterations=10, stiffness=1.0, tolerance=0.0):
+    def from_model(cls, model: Model, *, springs: np.ndarray | None = None, iterations: int = 10,
+                   stiffness: float = 1.0, tolerance: float = 0.0) -> DistanceConstraints:
         """Distance constraints on a model's springs, at their rest lengths.
 
         Parameters
@@ -325,7 +332,8 @@ class StrainLimit(_PairProjection):
     1.1
     """
 
-    def __init__(self, model, tau, *, compression=None, iterations=10, tolerance=0.0, springs=None):
+    def __init__(self, model: Model, tau: float, *, compression: float | None = None, iterations: int = 10,
+                 tolerance: float = 0.0, springs: ArrayLike | None = None):
         if not (math.isfinite(tau) and tau > 0):
             raise ValueError(f"tau = {tau} is not > 0")
         if compression is not None and not (0.0 < compression < 1.0):

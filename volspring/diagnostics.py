@@ -24,6 +24,10 @@ from volspring.model import Model
 from volspring.forces import Gravity
 from volspring.scene import Scene, State
 from volspring.springs import spring_energy as _spring_energy
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["kinetic_energy", "spring_energy", "gravitational_energy", "potential_energy", "total_energy",
            "linear_momentum", "angular_momentum", "centre_of_mass", "TetInversion", "tet_inversion"]
@@ -45,17 +49,17 @@ def _scene(system) -> Scene:
     raise TypeError(f"expected a Scene or Model, got {type(system).__name__}")
 
 
-def kinetic_energy(system, state: State) -> float:
+def kinetic_energy(system: Scene | Model, state: State) -> float:
     """sum 1/2 m_i |v_i|^2 [J]."""
     return _scene(system).kinetic_energy(state.v)
 
 
-def spring_energy(system, state: State) -> float:
+def spring_energy(system: Scene | Model, state: State) -> float:
     """Elastic energy of the springs, sum 1/2 k_e (l - l0)^2 [J]."""
     return _spring_energy(_model(system), state.x)
 
 
-def gravitational_energy(system, state: State) -> float:
+def gravitational_energy(system: Scene | Model, state: State) -> float:
     """Potential of the scene's :class:`Gravity` forces, -sum m_i g . x_i [J] (0 for a bare model)."""
     if isinstance(system, Model):
         return 0.0
@@ -64,28 +68,28 @@ def gravitational_energy(system, state: State) -> float:
                      if isinstance(force, Gravity)))
 
 
-def potential_energy(system, state: State) -> float:
+def potential_energy(system: Scene | Model, state: State) -> float:
     """Springs plus every conservative force of the scene (those with ``potential_energy``) [J]."""
     return _scene(system).potential_energy(state.x, state.t)
 
 
-def total_energy(system, state: State) -> float:
+def total_energy(system: Scene | Model, state: State) -> float:
     """Kinetic plus potential energy [J]."""
     return kinetic_energy(system, state) + potential_energy(system, state)
 
 
-def linear_momentum(system, state: State) -> np.ndarray:
+def linear_momentum(system: Scene | Model, state: State) -> np.ndarray:
     """(3,) float -- sum m_i v_i [kg m/s]."""
     return _model(system).masses @ state.v
 
 
-def centre_of_mass(system, state: State) -> np.ndarray:
+def centre_of_mass(system: Scene | Model, state: State) -> np.ndarray:
     """(3,) float -- sum m_i x_i / sum m_i [m]."""
     model = _model(system)
     return model.masses @ state.x / model.total_mass
 
 
-def angular_momentum(system, state: State, *, about=None) -> np.ndarray:
+def angular_momentum(system: Scene | Model, state: State, *, about: ArrayLike | None = None) -> np.ndarray:
     """(3,) float -- sum m_i (x_i - c) x v_i [kg m^2/s], about the centre of mass unless ``about`` (3,) [m]."""
     model = _model(system)
     centre = centre_of_mass(model, state) if about is None else np.asarray(about, dtype=np.float64)
@@ -110,7 +114,7 @@ class TetInversion(NamedTuple):
     tet_count: int
 
 
-def tet_inversion(system, x) -> TetInversion:
+def tet_inversion(system: Scene | Model, x: ArrayLike) -> TetInversion:
     """Inverted tets of the model's tet mesh at positions ``x``.
 
     A spring network has no notion of orientation: soft settings let tets turn inside out

@@ -12,7 +12,7 @@ class SimulationDiverged(FloatingPointError):
     Attributes name where: ``step``, ``time`` [s], ``dt`` [s] and ``node`` (the worst node).
     """
 
-    def __init__(self, reason, *, step, time, dt, node):
+    def __init__(self, reason: str, *, step: int, time: float, dt: float, node: int | None):
         self.step, self.time, self.dt, self.node = step, time, dt, node
         super().__init__(f"simulation diverged at step {step} (t = {time:.6g} s, dt = {dt:.6g} s), "
                          f"worst node {node}: {reason}")
@@ -21,7 +21,7 @@ class SimulationDiverged(FloatingPointError):
 class SpringCollapsed(FloatingPointError):
     """A spring reached zero length, so its direction is undefined; ``spring`` is its index."""
 
-    def __init__(self, spring, i, j):
+    def __init__(self, spring: int, i: int, j: int):
         self.spring = spring
         super().__init__(f"spring {spring} between nodes {i} and {j} has collapsed to zero length")
 

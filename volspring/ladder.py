@@ -94,6 +94,12 @@ import scipy.sparse as sp
 
 from volspring.elements import CorotatedTets, NodalStrain
 from volspring.material import Material, _real_number, _shown
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.mesh import TetMesh
+    from volspring.elements.springs import Springs
 
 __all__ = ["DEFAULT_ALPHA", "MODELS", "TetMaterials", "network_moduli", "network_poisson_ratio", "smoothed_elements",
            "volume_rung_moduli"]
@@ -118,7 +124,8 @@ class TetMaterials:
     regions: np.ndarray | None
 
     @classmethod
-    def of(cls, tet_count, material, *, regions=None, materials=None) -> "TetMaterials":
+    def of(cls, tet_count: int, material: Material, *, regions: np.ndarray | None = None,
+           materials: Mapping[int, Material] | None = None) -> "TetMaterials":
         """Per-tet materials from one ``material`` (the default) and optional ``materials`` per region tag.
 
         Parameters
@@ -295,7 +302,7 @@ def _free_probe(mesh, stiffness) -> np.ndarray:
     return np.array([f @ u for f, u in zip(loads, solved)]) / mesh.volume
 
 
-def network_moduli(mesh, springs) -> tuple:
+def network_moduli(mesh: TetMesh, springs: Springs) -> tuple:
     """The shear and bulk modulus of a spring network on a tet mesh, measured on the mesh itself.
 
     Two probes of the network alone (each one sparse factorisation or AMG hierarchy, three
@@ -333,12 +340,13 @@ def network_moduli(mesh, springs) -> tuple:
     return 0.5 * (mu_held + mu_free), 0.5 * (bulk_held + bulk_free)
 
 
-def network_poisson_ratio(mu_s, K_s) -> float:
+def network_poisson_ratio(mu_s: float, K_s: float) -> float:
     """nu of an isotropic solid with shear modulus mu_s and bulk modulus K_s."""
     return (3.0 * K_s - 2.0 * mu_s) / (2.0 * (3.0 * K_s + mu_s))
 
 
-def smoothed_elements(mesh, tet_materials, *, alpha=None, stiffness_damping=0.0) -> tuple:
+def smoothed_elements(mesh: TetMesh, tet_materials: TetMaterials, *, alpha: float | None = None,
+                      stiffness_damping: float = 0.0) -> tuple:
     """The smoothed rung's element sets: CorotatedTets((1 - alpha) mu), the nodal shear NodalStrain(alpha mu, 0)
     on node domains, and the volume NodalStrain(0, lambda) on pairs of nodes (:func:`pair_nodes`)."""
     alpha = checked_alpha(alpha)
@@ -350,7 +358,7 @@ def smoothed_elements(mesh, tet_materials, *, alpha=None, stiffness_damping=0.0)
                         stiffness_damping=stiffness_damping))
 
 
-def volume_rung_moduli(mesh, tet_materials, unit_springs) -> tuple:
+def volume_rung_moduli(mesh: TetMesh, tet_materials: TetMaterials, unit_springs: Springs) -> tuple:
     """Per-tet spring modulus E'_t and bulk coefficient kappa_t of the ``"springs+volume"`` rung.
 
     ``unit_springs`` are the rule's springs for E = 1 in every tet (a rule is linear in each tet's

@@ -63,6 +63,13 @@ from meshing.topology import SPRING_KINDS
 from volspring.elements import AngleSprings, Springs
 from volspring.material import Material, _real_number
 from volspring.model import Model
+from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.mesh import TetMesh
+    import trimesh
+    from meshing.shapes import Shape
 
 __all__ = ["BEND_SHARE", "BODY_DIAGONAL_SHARE", "LATTICE_RULES", "LatticeBody", "LatticeConstants",
            "box_lattice_model", "lattice_body", "lattice_constants", "lattice_model"]
@@ -241,9 +248,9 @@ def lattice_model(lattice: Lattice, material: Material, *, shear: bool = True, b
     return LatticeBody(model, lattice, constants, family)
 
 
-def lattice_body(body, cell_size: float, material: Material, *, shear: bool = True, bend: bool = True,
-                 angles: bool = False, rule: str = "isotropic", samples: int = 4, damping_ratio: float | None = None,
-                 surface_size: float | None = None) -> LatticeBody:
+def lattice_body(body: trimesh.Trimesh | Shape, cell_size: float, material: Material, *, shear: bool = True,
+                 bend: bool = True, angles: bool = False, rule: str = "isotropic", samples: int = 4,
+                 damping_ratio: float | None = None, surface_size: float | None = None) -> LatticeBody:
     """A lattice body filling a closed surface or a built-in shape, its surface anchored into it.
 
     Parameters
@@ -297,7 +304,7 @@ def lattice_body(body, cell_size: float, material: Material, *, shear: bool = Tr
     return LatticeBody(result.model, lattice, result.constants, result.spring_family, anchor_lattice(lattice, surface))
 
 
-def box_lattice_model(mesh, material: Material, **options) -> LatticeBody:
+def box_lattice_model(mesh: TetMesh, material: Material, **options: Any) -> LatticeBody:
     """The lattice of a structured box mesh (a validation case's beam, bar or cube), on the same nodes.
 
     For a mesh of :func:`meshing.structured_box` with cubic cells, the lattice's nodes are the mesh's,

@@ -26,6 +26,13 @@ from volspring.elements.springs import checked_pairs, per_item_array
 from volspring.material import Material, _real_array, _real_number, _shown
 from meshing.mesh import TetMesh
 from meshing.topology import SpringTopology, kind_counts, vector_lengths
+from collections.abc import Mapping
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.bodies import Body
+    from numpy.typing import ArrayLike
 
 __all__ = ["STIFFNESS_RULES", "FORCE_LAWS", "Model"]
 
@@ -133,8 +140,9 @@ class Model:
 
     # ------------------------------------------------------------------ constructors
     @classmethod
-    def from_arrays(cls, positions, masses, springs, *, stiffness, damping=0.0, rest_lengths=None,
-                    law="hooke") -> "Model":
+    def from_arrays(cls, positions: ArrayLike, masses: ArrayLike, springs: ArrayLike, *,
+                    stiffness: float | np.ndarray, damping: float | np.ndarray = 0.0,
+                    rest_lengths: np.ndarray | None = None, law: str = "hooke") -> "Model":
         """A model from raw arrays (strings, custom networks, tests).
 
         Parameters
@@ -180,9 +188,11 @@ class Model:
         return cls(positions, masses, (Springs(len(positions), springs, stiffness, damping, rest_lengths, 0),))
 
     @classmethod
-    def from_mesh(cls, body, material: Material, *, model="springs", rule="van_gelder", stiffness=None,
-                  law="hooke", damping_ratio=None, damping=None, alpha=None, regions=None,
-                  materials=None) -> "Model":
+    def from_mesh(cls, body: TetMesh | SpringTopology, material: Material, *, model: str = "springs",
+                  rule: str = "van_gelder", stiffness: float | None = None, law: str = "hooke",
+                  damping_ratio: float | None = None, damping: float | np.ndarray | None = None,
+                  alpha: float | None = None, regions: np.ndarray | None = None,
+                  materials: Mapping[int, Material] | None = None) -> "Model":
         """A model from a tet mesh (or a topology with shells) and a material, on a rung of the ladder.
 
         Parameters
@@ -288,7 +298,7 @@ class Model:
         return result
 
     @classmethod
-    def from_bodies(cls, bodies) -> "Model":
+    def from_bodies(cls, bodies: Sequence[Body]) -> "Model":
         """One model from several placed bodies (:class:`volspring.bodies.Body`).
 
         Each body is built with :meth:`from_mesh` and placed; the result has ``node_body``,
@@ -326,11 +336,11 @@ class Model:
         return assemble(cls, bodies)
 
     # ------------------------------------------------------------------ element sets
-    def with_elements(self, *element_sets) -> "Model":
+    def with_elements(self, *element_sets: ElementSet) -> "Model":
         """A copy with more element sets (e.g. a volume term), everything else shared."""
         return replace(self, elements=self.elements + element_sets)
 
-    def supported(self, held) -> "Model":
+    def supported(self, held: np.ndarray) -> "Model":
         """The model a scene simulates when its supports hold the nodes ``held`` ((n,) bool): each element set's
         :meth:`~volspring.elements.ElementSet.supported`; the model itself when no set changes (springs
         never do; the smoothed rung's volume pairs do)."""
@@ -347,7 +357,7 @@ class Model:
                 return element_set
         return Springs(self.node_count, np.zeros((0, 2), dtype=np.int64), 0.0, 0.0, 1.0, 0)
 
-    def forces(self, x, v=None) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """(n, 3) float -- internal forces of all element sets at positions x [m] (and velocities v [m/s],
         for the dampers) [N]."""
         if not self.elements:
@@ -357,7 +367,7 @@ class Model:
             total += element_set.forces(x, v)
         return total
 
-    def energy(self, x) -> float:
+    def energy(self, x: np.ndarray) -> float:
         """Potential energy of all element sets at positions x [J]."""
         return float(sum(element_set.energy(x) for element_set in self.elements))
 

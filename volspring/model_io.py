@@ -77,6 +77,7 @@ from volspring.elements import AngleSprings, CorotatedTets, DihedralSprings, Nod
 from volspring.elements.tet_kinematics import TetGradients
 from volspring.material import Material
 from volspring.model import Model
+import os
 
 __all__ = ["ELEMENT_SET_TYPES", "MODEL_FORMAT", "MODEL_SUFFIX", "MODEL_VERSION", "load_model", "save_model"]
 
@@ -197,7 +198,7 @@ ELEMENT_SET_TYPES = {"springs": (Springs, _springs_arrays, _springs_from_file),
                      "dihedral_springs": (DihedralSprings, _joint_arrays, _joints_from_file(DihedralSprings, 4))}
 
 
-def save_model(path, model: Model) -> Path:
+def save_model(path: str | os.PathLike[str], model: Model) -> Path:
     """Save a model (rest shape, masses, bodies, materials, element sets, topology) to a file, atomically.
 
     Parameters
@@ -252,7 +253,7 @@ def save_model(path, model: Model) -> Path:
     return write_archive(path, arrays, format_name=MODEL_FORMAT, version=MODEL_VERSION)
 
 
-def load_model(path) -> Model:
+def load_model(path: str | os.PathLike[str]) -> Model:
     """Load a model saved by :func:`save_model`.
 
     Parameters

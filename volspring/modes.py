@@ -20,6 +20,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring.assembly import BlockPattern
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.scene import Scene
 
 __all__ = ["DENSE_DOFS", "ModalResult", "solve_modes"]
 
@@ -70,7 +74,8 @@ def system_matrices(scene, *, x=None, t=0.0):
     return K[keep][:, keep], np.repeat(model.masses, 3)[dofs[keep]], dofs[keep]
 
 
-def solve_modes(scene, *, count=6, x=None, t=0.0, dense_dofs=DENSE_DOFS) -> ModalResult:
+def solve_modes(scene: Scene, *, count: int = 6, x: np.ndarray | None = None, t: float = 0.0,
+                dense_dofs: int = DENSE_DOFS) -> ModalResult:
     """The ``count`` lowest vibration modes of ``scene`` about x (default: the rest shape).
 
     Parameters

@@ -22,6 +22,12 @@ Examples
 from __future__ import annotations
 
 import math
+from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.scene import State
 
 __all__ = ["SimulationProgress", "notebook_progress"]
 
@@ -49,7 +55,8 @@ class SimulationProgress:
         The bar; ``bar.n`` is the simulated time reached since ``start`` [s].
     """
 
-    def __init__(self, duration, *, start=0.0, then=None, desc="simulate", **options):
+    def __init__(self, duration: float, *, start: float = 0.0, then: Callable[[int, State], object] | None = None,
+                 desc: str = "simulate", **options: Any):
         from tqdm.auto import tqdm
 
         duration, start = float(duration), float(start)
@@ -64,7 +71,7 @@ class SimulationProgress:
                                          "[{elapsed}<{remaining}]{postfix}")
         self.bar = tqdm(total=duration, desc=desc, unit="s", **options)
 
-    def __call__(self, frame_index, state):
+    def __call__(self, frame_index: int, state: State) -> object:
         """Move the bar to ``state.t`` (simulated time [s]) and name the frame; then call ``then``."""
         reached = min(max(float(state.t) - self.start, 0.0), self.bar.total)
         self.bar.set_postfix_str(f"frame {frame_index}", refresh=False)
@@ -82,7 +89,8 @@ class SimulationProgress:
         self.close()
 
 
-def notebook_progress(duration, *, start=0.0, then=None, desc="simulate", **options) -> SimulationProgress:
+def notebook_progress(duration: float, *, start: float = 0.0, then: Callable[..., Any] | None = None,
+                      desc: str = "simulate", **options: Any) -> SimulationProgress:
     """A progress bar to pass as :func:`~volspring.simulate`'s ``callback``: a widget in a notebook, text elsewhere.
 
     Parameters

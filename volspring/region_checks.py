@@ -11,6 +11,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["AXES", "as_points", "axis_index"]
 
@@ -18,7 +22,7 @@ __all__ = ["AXES", "as_points", "axis_index"]
 AXES = ("x", "y", "z")
 
 
-def as_points(points) -> np.ndarray:
+def as_points(points: ArrayLike) -> np.ndarray:
     """(n, 3) float64 -- ``points`` checked: three finite coordinates [m] per point."""
     try:
         array = np.asarray(points, dtype=float)
@@ -34,7 +38,7 @@ def as_points(points) -> np.ndarray:
     return array
 
 
-def axis_index(axis) -> int:
+def axis_index(axis: int | str) -> int:
     """0, 1 or 2 for an axis given as ``"x"``, ``"y"``, ``"z"`` (any case) or as that index."""
     if isinstance(axis, str) and axis.lower() in AXES:
         return AXES.index(axis.lower())

@@ -12,6 +12,7 @@ import re
 
 from volspring.region_checks import AXES, _finite, as_points
 from volspring.region_types import FACE_NAMES, Box, Face, HalfSpace, Region
+import numpy as np
 
 __all__ = ["describe_bounds", "parse_region"]
 
@@ -96,7 +97,7 @@ def parse_region(text: str, *, unit: float = 1.0, tolerance: float | None = None
     raise ValueError(f"{where} is not one of the region forms {_FORMS}")
 
 
-def describe_bounds(points) -> str:
+def describe_bounds(points: np.ndarray) -> str:
     """The bounding box of (n, 3) points as ``"[x0, x1] x [y0, y1] x [z0, z1]"`` [m], for messages
     about a region that selects nothing.
 

@@ -15,6 +15,7 @@ import numpy as np
 
 from meshing.tolerances import ON_SURFACE
 from volspring.region_checks import AXES, _bound, _check_tolerance, _finite, _shown, _vector, as_points, axis_index
+from typing import Any
 
 __all__ = ["FACE_NAMES", "Box", "Face", "HalfSpace", "Region"]
 
@@ -31,7 +32,7 @@ class Region:
 
     tolerance: float | None
 
-    def nodes(self, points) -> np.ndarray:
+    def nodes(self, points: np.ndarray) -> np.ndarray:
         """Which points lie in the region, its boundary included up to the slack.
 
         Parameters
@@ -52,7 +53,7 @@ class Region:
         points = as_points(points)
         return self._select(points, self.slack(points))
 
-    def __call__(self, points) -> np.ndarray:
+    def __call__(self, points: np.ndarray) -> np.ndarray:
         """The same as :meth:`nodes`: regions are callables on (n, 3) points."""
         return self.nodes(points)
 
@@ -111,7 +112,7 @@ class Box(Region):
         _check_tolerance(self.tolerance)
 
     @classmethod
-    def plane(cls, axis, value: float, **options) -> "Box":
+    def plane(cls, axis: int | str, value: float, **options: Any) -> "Box":
         """The plane ``axis = value`` [m], a box flat along ``axis`` and open along the others;
         e.g. ``Box.plane("x", 0.0)`` for the end face x = 0 of a beam. ``options`` go to :class:`Box`."""
         index = axis_index(axis)

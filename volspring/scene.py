@@ -29,6 +29,11 @@ from volspring.forces._checks import MassProportional
 from volspring.material import _real_array, _real_number, _shown
 from volspring.supports import Pins, Prescribed, Sliding
 from volspring.model import Model
+from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["State", "Pins", "Scene"]
 
@@ -58,7 +63,7 @@ class State:
     step: int = 0
     memory: dict = field(default_factory=dict)
 
-    def replace(self, **changes) -> "State":
+    def replace(self, **changes: Any) -> "State":
         return replace(self, **changes)
 
 
@@ -179,7 +184,7 @@ class Scene:
         """Whether some node is held in some components but free in others (sliding, prescribed)."""
         return bool((self.held.any(axis=1) & self.free).any())
 
-    def initial_state(self, x=None, v=None, t=0.0) -> State:
+    def initial_state(self, x: np.ndarray | None = None, v: ArrayLike | None = None, t: float = 0.0) -> State:
         """A state at rest (or at the given x, v), with the pins where they belong at t.
 
         Parameters
@@ -213,7 +218,7 @@ class Scene:
         self.enforce_supports(x, v, t)
         return State(x, v, t)
 
-    def check_state(self, state, *, finite=True) -> None:
+    def check_state(self, state: State, *, finite: bool = True) -> None:
         """Refuse a state that does not fit this scene's model, or (with ``finite``) holds NaN or Inf.
 
         :meth:`Integrator.step <volspring.integrators.Integrator.step>` calls it with
@@ -253,7 +258,7 @@ class Scene:
         if finite and not math.isfinite(state.t):
             raise ValueError(f"state.t = {state.t} s is not a finite time")
 
-    def support_motion(self, t) -> tuple:
+    def support_motion(self, t: float) -> tuple:
         """(positions (n, 3) [m], velocities (n, 3) [m/s]) the supports prescribe at time t; only the
         entries where :attr:`held` is True mean anything (the rest are 0)."""
         positions, velocities = np.zeros((self.model.node_count, 3)), np.zeros((self.model.node_count, 3))
@@ -264,7 +269,7 @@ class Scene:
             velocities[support.nodes[:, None], np.flatnonzero(held)] = support.velocities(t)[:, held]
         return positions, velocities
 
-    def enforce_supports(self, x, v, t) -> None:
+    def enforce_supports(self, x: np.ndarray, v: np.ndarray, t: float) -> None:
         """Set the held components of positions and velocities to what the supports prescribe at t, in place."""
         if not self.all_supports:
             return
@@ -274,7 +279,7 @@ class Scene:
 
     enforce_pins = enforce_supports
 
-    def project(self, x, v, x_start, t, dt) -> None:
+    def project(self, x: np.ndarray, v: np.ndarray, x_start: np.ndarray, t: float, dt: float) -> None:
         """After a step: project constraints, then obstacles, then put held components back, in place."""
         for item in self.constraints + self.obstacles:
             item.project(x, v, x_start, t, dt, self.free)
@@ -286,7 +291,8 @@ class Scene:
         """Whether every external force has a potential (the model's element sets all have one)."""
         return all(isinstance(force, HasPotential) for force in self.forces)
 
-    def external_forces(self, x, v, t, out=None, *, conservative=None) -> np.ndarray:
+    def external_forces(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray | None = None, *,
+                        conservative: bool | None = None) -> np.ndarray:
         """(n, 3) float -- the external forces on every node [N], added into ``out`` when given.
 
         ``conservative=False`` sums only the forces without a potential (whose work energy
@@ -298,11 +304,11 @@ class Scene:
                 force.accumulate(self.model, x, v, t, out)
         return out
 
-    def forces_at(self, x, v, t) -> np.ndarray:
+    def forces_at(self, x: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         """(n, 3) float -- total force on every node [N]: the model's element sets and the external forces."""
         return self.external_forces(x, v, t, out=self.model.forces(x, v))
 
-    def external_jacobian(self, x, v, t) -> tuple:
+    def external_jacobian(self, x: np.ndarray, v: np.ndarray, t: float) -> tuple:
         """(dF_dx, dF_dv) of the external forces, each (3n, 3n) sparse or None where no force has one.
 
         Forces without a ``jacobian`` are left out (they are treated explicitly by the implicit
@@ -320,22 +326,22 @@ class Scene:
                 dfdv = jv if dfdv is None else dfdv + jv
         return dfdx, dfdv
 
-    def external_potential(self, x, t=0.0) -> float:
+    def external_potential(self, x: np.ndarray, t: float = 0.0) -> float:
         """Potential of the conservative external forces [J] (non-conservative ones contribute nothing)."""
         return float(sum(force.potential_energy(self.model, x, t) for force in self.forces
                          if isinstance(force, HasPotential)))
 
-    def accelerations(self, x, v, t) -> np.ndarray:
+    def accelerations(self, x: np.ndarray, v: np.ndarray, t: float) -> np.ndarray:
         """(n, 3) float -- F / m [m/s^2], 0 on held components (their motion is set by :meth:`enforce_supports`)."""
         a = self.forces_at(x, v, t) / self.model.masses[:, None]
         a[self.held] = 0.0
         return a
 
-    def potential_energy(self, x, t=0.0) -> float:
+    def potential_energy(self, x: np.ndarray, t: float = 0.0) -> float:
         """Energy of the element sets plus the potential of every conservative external force [J]."""
         return self.model.energy(x) + self.external_potential(x, t)
 
-    def kinetic_energy(self, v) -> float:
+    def kinetic_energy(self, v: np.ndarray) -> float:
         return float(0.5 * np.dot(self.model.masses, np.einsum("ij,ij->i", v, v)))
 
 

@@ -61,6 +61,8 @@ from volspring.integrators import Integrator, make_integrator
 from volspring.material import _real_number
 from volspring.scene import Scene, State
 from volspring.stability import GUARD_ACTIONS, StabilityGuard
+from typing import Any
+from collections.abc import Callable
 
 __all__ = ["simulate", "SimulationResult", "RUNAWAY_FACTOR", "RUNAWAY_CHECKS", "ENERGY_CHECK_INTERVAL"]
 
@@ -211,9 +213,10 @@ class _EnergyMonitor:
         raise SimulationDiverged(reason, step=state.step, time=state.t, dt=dt, node=int(np.argmax(node_energy)))
 
 
-def simulate(scene: Scene, integrator, *, duration, dt, state=None, frame_dt=None, callback=None,
-             guard="warn", energy_limit=None, runaway_factor=RUNAWAY_FACTOR,
-             runaway_checks=RUNAWAY_CHECKS) -> SimulationResult:
+def simulate(scene: Scene, integrator: Integrator | str, *, duration: float, dt: float, state: State | None = None,
+             frame_dt: float | None = None, callback: Callable[..., Any] | None = None, guard: str = "warn",
+             energy_limit: float | None = None, runaway_factor: float = RUNAWAY_FACTOR,
+             runaway_checks: int = RUNAWAY_CHECKS) -> SimulationResult:
     """Run ``scene`` for ``duration`` seconds with fixed steps ``dt``.
 
     Parameters

@@ -50,6 +50,10 @@ from volspring.errors import StepTooLarge, StepTooLargeWarning
 from volspring.model import Model
 from volspring.scene import Scene
 from volspring.springs import spring_stiffness_blocks
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.integrators.base import Integrator
 
 __all__ = ["omega_max_bound", "omega_max_estimate", "omega_max", "critical_step", "critical_steps",
            "growth_per_step", "StabilityGuard", "GUARD_ACTIONS"]
@@ -79,7 +83,7 @@ def _spring_blocks(model, x):
     return spring_stiffness_blocks(model, x)
 
 
-def omega_max_bound(system, *, x=None) -> float:
+def omega_max_bound(system: Scene | Model, *, x: np.ndarray | None = None) -> float:
     """Gershgorin bound on the highest angular frequency of the free dofs [rad/s].
 
     Parameters
@@ -122,7 +126,7 @@ def _free_stiffness(model, free, x):
     return (scale @ stiffness_matrix(model, x, free=free) @ scale).tocsr()
 
 
-def omega_max_estimate(system, *, x=None, exact_dofs=EXACT_DOFS) -> float:
+def omega_max_estimate(system: Scene | Model, *, x: np.ndarray | None = None, exact_dofs: int = EXACT_DOFS) -> float:
     """A sharp estimate of the highest angular frequency of the free dofs [rad/s].
 
     Parameters
@@ -164,7 +168,7 @@ def omega_max_estimate(system, *, x=None, exact_dofs=EXACT_DOFS) -> float:
     return float(min(omega, bound))
 
 
-def omega_max(system, *, method="estimate", x=None) -> float:
+def omega_max(system: Scene | Model, *, method: str = "estimate", x: np.ndarray | None = None) -> float:
     """omega_max [rad/s] by ``method``: ``"estimate"`` (sharp) or ``"bound"`` (Gershgorin, safe)."""
     if method == "estimate":
         return omega_max_estimate(system, x=x)
@@ -180,7 +184,7 @@ def _integrator_class(integrator):
     return integrator if isinstance(integrator, type) else type(integrator)
 
 
-def critical_step(integrator, omega_max: float) -> float:
+def critical_step(integrator: Integrator | type[Integrator] | str, omega_max: float) -> float:
     """Largest stable step ``stability_limit / omega_max`` [s] of an integrator.
 
     Parameters
@@ -203,7 +207,7 @@ def critical_step(integrator, omega_max: float) -> float:
     return limit / omega_max
 
 
-def critical_steps(system, *, method="estimate") -> dict:
+def critical_steps(system: Scene | Model, *, method: str = "estimate") -> dict:
     """Critical step [s] of every registered explicit integrator, by name."""
     from volspring.integrators import INTEGRATORS, integrator_class
 
@@ -212,7 +216,7 @@ def critical_steps(system, *, method="estimate") -> dict:
     return {name: critical_step(cls, omega) for name, cls in classes.items() if cls.explicit}
 
 
-def growth_per_step(integrator, h_omega: float) -> float:
+def growth_per_step(integrator: Integrator | type[Integrator] | str, h_omega: float) -> float:
     """Amplitude factor per step of an undamped mode with h * omega = ``h_omega``.
 
     Exact for the explicit schemes of volspring (the modulus of the largest eigenvalue of the
@@ -272,8 +276,8 @@ class StabilityGuard:
     volspring.errors.StepTooLarge: dt = 0.21 s is above the critical step 0.2 s of symplectic_euler ...
     """
 
-    def __init__(self, scene: Scene, integrator, *, action="warn", method="estimate", growth_limit=2.0,
-                 omega_max=None):
+    def __init__(self, scene: Scene, integrator: Integrator | type[Integrator] | str, *, action: str = "warn",
+                 method: str = "estimate", growth_limit: float = 2.0, omega_max: float | None = None):
         if action not in GUARD_ACTIONS:
             raise ValueError(f"guard action = {action!r}; expected one of {', '.join(map(repr, GUARD_ACTIONS))}")
         if method not in ("estimate", "bound"):

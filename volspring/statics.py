@@ -46,6 +46,10 @@ from meshing.geometry import rigid_body_modes
 from volspring.assembly import BlockPattern, eliminate_held, held_unknowns
 from volspring.errors import SolverNotConverged
 from volspring.solvers import make_linear_solver
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.scene import Scene
 
 __all__ = ["StaticResult", "solve_static"]
 
@@ -86,8 +90,9 @@ def _potential(scene, x, t, conservative):
     return None
 
 
-def solve_static(scene, *, x0=None, t=0.0, rtol=1e-8, max_iterations=50, solver="amg", linear_rtol=1e-4,
-                 clamp_compression=False) -> StaticResult:
+def solve_static(scene: Scene, *, x0: np.ndarray | None = None, t: float = 0.0, rtol: float = 1e-8,
+                 max_iterations: int = 50, solver: str = "amg", linear_rtol: float = 1e-4,
+                 clamp_compression: bool = False) -> StaticResult:
     """Static equilibrium of ``scene`` under its loads and pins (see the module docstring).
 
     Parameters

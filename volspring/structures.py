@@ -49,6 +49,12 @@ from volspring.elements import AngleSprings, Springs
 from volspring.elements.angles import DihedralSprings
 from volspring.material import _real_array, _real_number
 from volspring.model import Model
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from volspring.constraints import StrainLimit
 
 __all__ = ["CLOTH_SPRING_KINDS", "TWIST_MIN_TURN", "cloth_grid", "cloth_mesh", "cloth_springs", "cloth_strain_limit",
            "combine", "hair", "sheet_grid", "strand_points", "string"]
@@ -58,8 +64,10 @@ __all__ = ["CLOTH_SPRING_KINDS", "TWIST_MIN_TURN", "cloth_grid", "cloth_mesh", "
 TWIST_MIN_TURN = 0.1
 
 
-def string(start, end=None, *, count, length=None, direction=(0.0, 0.0, -1.0), linear_density=None, mass=None,
-           axial_stiffness=None, stiffness=None, tension=None, rest_length=None, damping=0.0) -> Model:
+def string(start: ArrayLike, end: ArrayLike | None = None, *, count: int, length: float | None = None,
+           direction: ArrayLike = (0.0, 0.0, -1.0), linear_density: float | None = None, mass: float | None = None,
+           axial_stiffness: float | None = None, stiffness: float | None = None, tension: float | None = None,
+           rest_length: float | None = None, damping: float = 0.0) -> Model:
     """A string (chain of masses and springs) from ``start`` to ``end``, or hanging ``length`` from ``start``.
 
     Parameters
@@ -150,7 +158,8 @@ def string(start, end=None, *, count, length=None, direction=(0.0, 0.0, -1.0), l
     return Model.from_arrays(positions, masses, pairs, stiffness=k, damping=damping, rest_lengths=rest)
 
 
-def strand_points(start, direction, length, count, *, curl_radius=0.0, curl_pitch=None) -> np.ndarray:
+def strand_points(start: ArrayLike, direction: ArrayLike, length: float, count: int, *, curl_radius: float = 0.0,
+                  curl_pitch: float | None = None) -> np.ndarray:
     """(count, 3) float -- a straight or helical strand, nodes equally spaced in arc length [m].
 
     Parameters
@@ -194,8 +203,9 @@ def strand_points(start, direction, length, count, *, curl_radius=0.0, curl_pitc
             + (pitch * t / (2 * np.pi))[:, None] * d)
 
 
-def hair(points, *, bending_stiffness, axial_stiffness, linear_density=None, mass=None, torsional_stiffness=None,
-         damping=0.0, root="clamped") -> Model:
+def hair(points: np.ndarray, *, bending_stiffness: float, axial_stiffness: float, linear_density: float | None = None,
+         mass: float | None = None, torsional_stiffness: float | None = None, damping: float = 0.0,
+         root: str = "clamped") -> Model:
     """A hair strand through ``points`` (its rest shape): stretch springs, angle springs, twist springs.
 
     Parameters
@@ -330,7 +340,9 @@ def _checked_points(points, why="") -> np.ndarray:
 CLOTH_SPRING_KINDS = {"structural": "cloth_structural", "shear": "cloth_shear", "bend": "cloth_bend"}
 
 
-def sheet_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))):
+def sheet_grid(width: float, height: float, nx: int, ny: int, *, origin: ArrayLike = (0.0, 0.0, 0.0),
+               axes: tuple[ArrayLike, ArrayLike] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+               ) -> tuple[np.ndarray, np.ndarray]:
     """A rectangle of (nx + 1) x (ny + 1) nodes and its triangles: the rest shape of :func:`cloth_grid`.
 
     Parameters
@@ -370,9 +382,11 @@ def sheet_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0
     return points, triangles
 
 
-def cloth_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
-               areal_density=None, mass=None, membrane_stiffness=None, stretch_stiffness=None,
-               shear_stiffness=None, bend_stiffness=0.0, damping=0.0) -> Model:
+def cloth_grid(width: float, height: float, nx: int, ny: int, *, origin: ArrayLike = (0.0, 0.0, 0.0),
+               axes: tuple[ArrayLike, ArrayLike] = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)),
+               areal_density: float | None = None, mass: float | None = None, membrane_stiffness: float | None = None,
+               stretch_stiffness: float | None = None, shear_stiffness: float | None = None,
+               bend_stiffness: float = 0.0, damping: float = 0.0) -> Model:
     """A rectangular cloth after Provot (1995): structural, shear and bend springs on a grid of nodes.
 
     On the grid of :func:`sheet_grid` (cells a = width / nx by b = height / ny): structural springs
@@ -468,8 +482,9 @@ def cloth_grid(width, height, nx, ny, *, origin=(0.0, 0.0, 0.0), axes=((1.0, 0.0
     return _cloth_model(points, masses, groups, damping)
 
 
-def cloth_mesh(points, triangles, *, areal_density=None, mass=None, membrane_stiffness=None, stretch_stiffness=None,
-               bend_stiffness=0.0, damping=0.0) -> Model:
+def cloth_mesh(points: ArrayLike, triangles: ArrayLike, *, areal_density: float | None = None,
+               mass: float | None = None, membrane_stiffness: float | None = None,
+               stretch_stiffness: float | None = None, bend_stiffness: float = 0.0, damping: float = 0.0) -> Model:
     """A cloth on any triangle mesh: structural springs on the edges, bend springs across them.
 
     Structural springs are the triangles' edges; across each interior edge (two triangles) a bend
@@ -575,7 +590,7 @@ def cloth_mesh(points, triangles, *, areal_density=None, mass=None, membrane_sti
     return _cloth_model(points, masses, groups, damping)
 
 
-def cloth_springs(model, *kinds) -> np.ndarray:
+def cloth_springs(model: Model, *kinds: str) -> np.ndarray:
     """(s,) bool -- the springs of a cloth model of the given kinds ("structural", "shear", "bend")."""
     unknown = [kind for kind in kinds if kind not in CLOTH_SPRING_KINDS]
     if unknown or not kinds:
@@ -584,8 +599,8 @@ def cloth_springs(model, *kinds) -> np.ndarray:
     return np.isin(model.kinds, codes)
 
 
-def cloth_strain_limit(model, tau=0.1, *, kinds=("structural", "shear"), iterations=20, tolerance=0.0,
-                       compression=None):
+def cloth_strain_limit(model: Model, tau: float = 0.1, *, kinds: Sequence[str] = ("structural", "shear"),
+                       iterations: int = 20, tolerance: float = 0.0, compression: float | None = None) -> StrainLimit:
     """Provot's strain limit on a cloth's springs: a constraint for ``Scene(..., constraints=[...])``.
 
     After every step, each selected spring longer than (1 + tau) l0 is pulled back to (1 + tau) l0 by
@@ -674,7 +689,7 @@ def _cells(name, count) -> int:
 
 
 # ---------------------------------------------------------------------------- several models in one
-def combine(models) -> Model:
+def combine(models: Sequence[Model]) -> Model:
     """One model from several: a meshed model (tet bodies) first, then cloths, strings and hair.
 
     The nodes are numbered model after model (model k's node i is ``offsets[k] + i``, ``offsets`` the

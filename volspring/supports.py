@@ -26,6 +26,7 @@ from typing import Callable
 import numpy as np
 
 from volspring.material import _shown
+from typing import Any
 
 __all__ = ["Pins", "Prescribed", "Sliding", "components_mask"]
 
@@ -34,7 +35,7 @@ _ALL_COMPONENTS = np.ones(3, dtype=bool)
 _ALL_COMPONENTS.setflags(write=False)
 
 
-def components_mask(components, *, label="components") -> np.ndarray:
+def components_mask(components: Any, *, label: str = "components") -> np.ndarray:
     """(3,) bool -- which of x, y, z a support holds: from a string ("xz"), axis indices ((0, 2)) or an axis.
 
     Raises
@@ -99,13 +100,13 @@ class _NodeSupport:
         """Whether the held components follow a motion (else they stay at rest)."""
         return getattr(self, "motion", None) is not None
 
-    def positions(self, rest_positions, t) -> np.ndarray:
+    def positions(self, rest_positions: np.ndarray, t: float) -> np.ndarray:
         """(p, 3) float -- where the nodes are at time t [m] (only the held components are used)."""
         if not self.moving:
             return rest_positions[self.nodes]
         return self._checked(self.motion(t), "motion", t)
 
-    def velocities(self, t) -> np.ndarray:
+    def velocities(self, t: float) -> np.ndarray:
         """(p, 3) float -- velocities of the nodes at time t [m/s] (only the held components are used)."""
         if not self.moving:
             return np.zeros((len(self.nodes), 3))
@@ -212,7 +213,7 @@ class Prescribed(_NodeSupport):
         self._prepare()
 
     @classmethod
-    def at(cls, nodes, components, positions) -> "Prescribed":
+    def at(cls, nodes: np.ndarray, components: Any, positions: np.ndarray) -> "Prescribed":
         """Components held at fixed ``positions`` (p, 3) [m] (e.g. rest positions plus a displacement).
 
         The motion is a picklable constant, so scenes built this way can be sent to other processes.

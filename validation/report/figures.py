@@ -14,6 +14,10 @@ import io
 import math
 
 import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
 
 __all__ = ["log_ticks", "model_label", "render_figures"]
 
@@ -29,7 +33,7 @@ def _svg(figure) -> str:
     return "data:image/svg+xml;base64," + base64.b64encode(buffer.getvalue()).decode("ascii")
 
 
-def log_ticks(axes) -> None:
+def log_ticks(axes: Axes) -> None:
     """Readable log axes: no labels on the minor ticks (matplotlib labels them when an axis spans
     few decades, and "2x10^-1 3x10^-1 ..." overlap); an axis that holds fewer than two powers of ten
     gets majors at 1, 2 and 5 x 10^k, labelled as plain numbers, so it still has labels. Call after

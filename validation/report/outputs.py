@@ -22,6 +22,15 @@ from validation.report import runner
 from meshing._io import atomic_path
 from meshing.mesh import TetMesh
 from validation.springs import VALIDATED_MODELS
+from typing import Any
+from collections.abc import Callable
+from collections.abc import Sequence
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from validation._case import Case
+    from volspring.output.run_folder import RunFolder
 
 __all__ = ["read_results", "validate", "write_outputs"]
 
@@ -29,8 +38,10 @@ __all__ = ["read_results", "validate", "write_outputs"]
 # so that replacing one there (a test's monkeypatch) replaces what runs here.
 
 
-def validate(out, *, cases=None, quick: bool = False, own_case=None, rules=RULES, models=VALIDATED_MODELS, folder=None,
-             progress=None, command=None, record=None) -> dict:
+def validate(out: np.ndarray, *, cases: Sequence[Case] | None = None, quick: bool = False, own_case: Case | None = None,
+             rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
+             folder: str | os.PathLike[str] | None = None, progress: Any = None, command: str | None = None,
+             record: RunFolder | None = None) -> dict:
     """:func:`~validation.report.runner.run_validation` then :func:`write_outputs` into ``out``; returns the results.
 
     ``record`` is passed on to :func:`write_outputs`.
@@ -42,7 +53,8 @@ def validate(out, *, cases=None, quick: bool = False, own_case=None, rules=RULES
     return results
 
 
-def write_outputs(out, results: dict, artefacts: dict, *, record=None) -> dict:
+def write_outputs(out: str | os.PathLike[str], results: dict, artefacts: dict, *,
+                  record: Callable[..., Any] | None = None) -> dict:
     """Write ``out/vtu/*.vtu``, ``out/results.json`` and ``out/report.html`` (in that order, each atomic).
 
     Parameters
@@ -133,7 +145,7 @@ def _write_vtu(folder: Path, name: str, comparison) -> tuple:
     return paths, models
 
 
-def read_results(path) -> dict:
+def read_results(path: str | os.PathLike[str]) -> dict:
     """A ``results.json`` written by :func:`write_outputs`, its schema checked.
 
     Raises

@@ -46,6 +46,14 @@ from validation.cases import build_case, uniaxial_compression
 from validation.compare import RULES, compare_modes, compare_static
 from validation.heldout import HELDOUT_CASE_NAMES
 from validation.springs import VALIDATED_MODELS
+from typing import Any
+from collections.abc import Callable
+from collections.abc import Sequence
+import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from validation._case import Case
 
 __all__ = ["BUILT_IN", "HELDOUT", "NOTES", "SCHEMA", "STATIC_CASES", "STUDIES", "SWEEP_NUS", "SWEEP_STRAINS", "UNITS",
            "run_validation", "versions"]
@@ -118,8 +126,9 @@ def _settings(quick: bool) -> dict:
             "cauchy_cells": 4}
 
 
-def run_validation(*, cases=None, quick: bool = False, own_case=None, rules=RULES, models=VALIDATED_MODELS, folder=None,
-                   progress=None) -> tuple:
+def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, own_case: Case | None = None,
+                   rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
+                   folder: str | os.PathLike[str] | None = None, progress: Callable[..., Any] | None = None) -> tuple:
     """Run cases, the ladder and studies.
 
     Parameters

@@ -20,6 +20,7 @@ True
 from __future__ import annotations
 
 import statistics
+from typing import Any
 
 __all__ = ["FREQUENCY_TOLERANCE", "bending_dominated", "headline", "model_accuracy", "percent", "volume_ratio"]
 
@@ -41,7 +42,7 @@ def percent(value: float, *, signed: bool = False) -> str:
     return text + "%"
 
 
-def volume_ratio(value, reference):
+def volume_ratio(value: float, reference: float | None) -> float | None:
     """The volume change ``value`` [m^3] as a multiple of ``reference`` [m^3]; None without a reference.
 
     A ratio below 0 says the model changes volume the other way (swells where the reference shrinks).
@@ -67,7 +68,7 @@ def bending_dominated(fem: dict) -> bool:
     return abs(linear) < abs(moved - linear)
 
 
-def model_accuracy(rows) -> dict:
+def model_accuracy(rows: list[dict[str, Any]]) -> dict:
     """Each rung's worst error and median cost over the ladder's rows.
 
     Parameters
@@ -83,7 +84,7 @@ def model_accuracy(rows) -> dict:
         ``cost_vs_springs`` (median ratio of its implicit step's wall time to the springs rung's) and
         ``step_seconds`` (median wall time of one implicit Euler step [s]); rungs without an answer left out.
     """
-    found = {}
+    found: dict[str, dict[str, list[Any]]] = {}
     for row in rows:
         if "refused" in row:
             continue

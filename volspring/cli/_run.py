@@ -23,6 +23,7 @@ from volspring.cli._arguments import (CHECKPOINT_NAME, EXIT_DIVERGED, EXIT_FAILE
                                       SURFACE_NAME, InputError, UsageError, build_parser, check_arguments,
                                       joined_vectors)
 from volspring.cli._terminal import Progress, fail, show_warning, summary_lines
+from collections.abc import Sequence
 
 __all__ = ["Diverged", "RunProgress", "main", "run"]
 
@@ -31,7 +32,7 @@ class Diverged(FloatingPointError):
     """The simulation diverged; the message also says which frames the output folder holds."""
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str] | None = None) -> int:
     """Run ``volspring sim`` (``volspring-sim``) with ``argv`` (default ``sys.argv[1:]``); returns the exit status.
 
     0 done; 2 a bad command line or bad input (values, files, the output folder, a checkpoint that does

@@ -12,6 +12,11 @@ from functools import cached_property
 import numpy as np
 
 from meshing.mesh import TET_EDGES, TET_FACES, TetMesh
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from volspring.model import Model
 
 __all__ = ["CollisionBodies"]
 
@@ -62,7 +67,7 @@ class CollisionBodies:
         object.__setattr__(self, "model_nodes", _frozen(nodes.astype(np.int64)))
 
     @classmethod
-    def from_model(cls, model) -> "CollisionBodies":
+    def from_model(cls, model: Model) -> "CollisionBodies":
         """The bodies of a :class:`~volspring.Model`: its topology's tet mesh split by ``model.node_body``.
 
         Body b's mesh holds the model's mesh nodes of body b in ascending order and the tets among
@@ -208,7 +213,7 @@ class CollisionBodies:
         return float(lengths.mean())
 
     # ------------------------------------------------------------------ positions
-    def stack_positions(self, positions) -> np.ndarray:
+    def stack_positions(self, positions: ArrayLike) -> np.ndarray:
         """One ``(N, 3)`` float64 array from a ``(N, 3)`` array or a sequence of ``(n_b, 3)`` arrays.
 
         Raises

@@ -48,6 +48,13 @@ from volspring.collision.spatial_hash import detect_collisions
 from volspring.collision.tet_tet import EdgeCrossingContacts, crossing_tet_pairs, edge_crossing_contacts
 from volspring.model import Model
 from meshing.topology import SPRING_KINDS
+from typing import Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from volspring.collision.penetration import PenetrationDepths
 
 __all__ = ["ContactForce", "ObstacleContactForce", "PenaltyContacts", "DEFAULT_STIFFNESS_FACTOR",
            "DEFAULT_DAMPING_RATIO", "DEFAULT_FRICTION_VELOCITY", "DEPTH_METHODS"]
@@ -165,9 +172,11 @@ class ContactForce(_PenaltyResponse):
     True
     """
 
-    def __init__(self, model, *, stiffness=None, stiffness_factor=DEFAULT_STIFFNESS_FACTOR, damping_ratio=None,
-                 damping=None, friction=0.0, friction_velocity=DEFAULT_FRICTION_VELOCITY, self_collision=False,
-                 method="consistent", cell_size=None, edges=False):
+    def __init__(self, model: Model, *, stiffness: float | None = None,
+                 stiffness_factor: float = DEFAULT_STIFFNESS_FACTOR, damping_ratio: float | None = None,
+                 damping: float | None = None, friction: float = 0.0,
+                 friction_velocity: float = DEFAULT_FRICTION_VELOCITY, self_collision: bool = False,
+                 method: str = "consistent", cell_size: float | None = None, edges: bool = False):
         model = _as_model(model)
         super().__init__(model, stiffness=stiffness, stiffness_factor=stiffness_factor, damping_ratio=damping_ratio,
                          damping=damping, friction=friction, friction_velocity=friction_velocity)
@@ -195,7 +204,7 @@ class ContactForce(_PenaltyResponse):
         return (f"ContactForce({self.bodies.body_count} bodies, method={self.method!r}, friction={self.friction:g}, "
                 f"self_collision={self.self_collision}, edges={self.edges})")
 
-    def penetration_depths(self, x):
+    def penetration_depths(self, x: np.ndarray) -> PenetrationDepths:
         """The :class:`~volspring.collision.PenetrationDepths` at model positions ``x`` (collision ids)."""
         return self._vertex_contacts(x)[1]
 
@@ -206,7 +215,7 @@ class ContactForce(_PenaltyResponse):
         options = {} if self.method == "closest_surface" else {"cell_size": self.cell_size}
         return hits, depth_method(self.bodies, positions, hits, **options)
 
-    def edge_crossings(self, x, hits=None) -> EdgeCrossingContacts:
+    def edge_crossings(self, x: np.ndarray, hits: Any = None) -> EdgeCrossingContacts:
         """The :class:`~volspring.collision.tet_tet.EdgeCrossingContacts` at model positions ``x`` (collision ids)."""
         positions = np.asarray(x, dtype=np.float64)[self.collision_nodes]
         # Only pairs that can hold a boundary edge of one tet through a boundary face of the other (the same contacts).
@@ -282,9 +291,11 @@ class ObstacleContactForce(_PenaltyResponse):
     [100.0, 0.0]
     """
 
-    def __init__(self, model, obstacles, *, nodes=None, thickness=0.0, stiffness=None,
-                 stiffness_factor=DEFAULT_STIFFNESS_FACTOR, damping_ratio=None, damping=None, friction=0.0,
-                 friction_velocity=DEFAULT_FRICTION_VELOCITY):
+    def __init__(self, model: Model, obstacles: Sequence[HalfSpace | StaticTriangleMesh], *,
+                 nodes: ArrayLike | None = None, thickness: float = 0.0, stiffness: float | None = None,
+                 stiffness_factor: float = DEFAULT_STIFFNESS_FACTOR, damping_ratio: float | None = None,
+                 damping: float | None = None, friction: float = 0.0,
+                 friction_velocity: float = DEFAULT_FRICTION_VELOCITY):
         model = _as_model(model)
         self.thickness = _positive(thickness, "thickness", allow_zero=True)
         E, length = _body_moduli(model)[model.node_body], _body_edge_lengths(model)[model.node_body]

@@ -29,6 +29,11 @@ from volspring.bodies import Body as _Body  # not a module global: the old name 
 from volspring.bodies import initial_velocities
 from volspring.collision.bodies import CollisionBodies
 from volspring.model import Model
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.bodies import Body
 
 __all__ = ["MultiBodyModel", "assemble_bodies"]
 
@@ -73,7 +78,7 @@ class MultiBodyModel:
     bodies: tuple
 
     @classmethod
-    def wrap(cls, model: Model, bodies) -> "MultiBodyModel":
+    def wrap(cls, model: Model, bodies: Sequence[Body]) -> "MultiBodyModel":
         """The old view of a model built by ``Model.from_bodies(bodies)``."""
         bodies = tuple(bodies)
         collision_bodies = CollisionBodies.from_model(model)
@@ -106,7 +111,7 @@ class MultiBodyModel:
                 f"{self.collision_bodies.tet_count} tets, {self.model.spring_count} springs)")
 
 
-def assemble_bodies(bodies) -> MultiBodyModel:
+def assemble_bodies(bodies: Sequence[Body]) -> MultiBodyModel:
     """Deprecated: use ``Model.from_bodies(bodies)`` and ``volspring.bodies.initial_velocities(bodies, model)``.
 
     Parameters

@@ -26,6 +26,12 @@ from functools import cached_property
 import numpy as np
 
 from meshing.geometry import nearest_surface_points, signed_volumes, triangle_area_normals
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    import trimesh
 
 __all__ = ["HalfSpace", "ObstacleContacts", "StaticTriangleMesh", "obstacle_contacts"]
 
@@ -100,11 +106,12 @@ class HalfSpace:
                             ("friction", float(self.friction))):
             object.__setattr__(self, name, value)
 
-    def signed_distances(self, x) -> np.ndarray:
+    def signed_distances(self, x: np.ndarray) -> np.ndarray:
         """(n,) float -- height of each node above the plane [m] (negative below)."""
         return (x - self.point) @ self.normal
 
-    def contacts(self, points, *, thickness=0.0):
+    def contacts(self, points: ArrayLike, *,
+                 thickness: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Points below the plane, or less than ``thickness`` above it, for penalty contact
         (``volspring.collision.ObstacleContactForce``).
 
@@ -129,7 +136,7 @@ class HalfSpace:
         closest = points[vertex] - height[vertex, None] * self.normal
         return vertex, depth, direction, closest, np.full(len(vertex), -1, dtype=np.int64)
 
-    def project(self, x, v, x_start, t, dt, free) -> None:
+    def project(self, x: np.ndarray, v: np.ndarray, x_start: np.ndarray, t: float, dt: float, free: np.ndarray) -> None:
         depth = -self.signed_distances(x)
         nodes = np.flatnonzero(free & (depth > 0))
         if nodes.size == 0:
@@ -216,7 +223,7 @@ class StaticTriangleMesh:
         object.__setattr__(self, "closed", closed)
 
     @classmethod
-    def from_trimesh(cls, mesh, *, band=None) -> "StaticTriangleMesh":
+    def from_trimesh(cls, mesh: trimesh.Trimesh, *, band: float | None = None) -> "StaticTriangleMesh":
         """Take ``mesh.vertices`` and ``mesh.faces`` of a ``trimesh.Trimesh`` (or anything with both)."""
         return cls(np.asarray(mesh.vertices), np.asarray(mesh.faces), band=band)
 
@@ -289,7 +296,8 @@ class StaticTriangleMesh:
         on_rim = (on_edge & rim_edge[edge]) | (on_corner & rim_vertex[corner])
         return normal / np.linalg.norm(normal, axis=1, keepdims=True), on_rim
 
-    def contacts(self, points, *, thickness=0.0):
+    def contacts(self, points: ArrayLike, *,
+                 thickness: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Vertices in contact: ``(vertex (k,), depth (k,) [m], direction (k, 3), closest (k, 3) [m], face (k,))``.
 
         A vertex is in contact when it is inside (below, for an open mesh) or outside and closer than
@@ -356,7 +364,8 @@ class ObstacleContacts:
         return len(self.vertex)
 
 
-def obstacle_contacts(obstacles, positions, *, thickness=0.0) -> ObstacleContacts:
+def obstacle_contacts(obstacles: Sequence[HalfSpace] | StaticTriangleMesh, positions: ArrayLike, *,
+                      thickness: float = 0.0) -> ObstacleContacts:
     """Every vertex inside any static obstacle, or closer than ``thickness`` to its surface.
 
     Parameters

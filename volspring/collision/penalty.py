@@ -65,6 +65,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from scipy import sparse
+    from volspring.model import Model
 
 __all__ = ["PenaltyContacts", "DEFAULT_STIFFNESS_FACTOR", "DEFAULT_DAMPING_RATIO", "DEFAULT_FRICTION_VELOCITY"]
 
@@ -173,7 +178,7 @@ class _PenaltyResponse:
             2.0 * self.damping_ratio * np.sqrt(k * reduced_mass)
         return k, c
 
-    def contacts(self, x) -> PenaltyContacts:
+    def contacts(self, x: np.ndarray) -> PenaltyContacts:
         """The contacts at positions ``x`` (n, 3) [m] (cached for repeated calls at the same positions)."""
         x = np.asarray(x, dtype=np.float64)
         if x.shape != (self.model.node_count, 3):
@@ -203,7 +208,7 @@ class _PenaltyResponse:
         return lam, active, force, tangential, rho
 
     # ------------------------------------------------------------------ the force protocol
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         """Add the contact forces [N] at (x, v) into ``out`` (n, 3)."""
         found = self.contacts(x)
         if not found.count:
@@ -214,7 +219,8 @@ class _PenaltyResponse:
         for axis in range(3):
             out[:, axis] += np.bincount(index, weights=per_node[:, :, axis].ravel(), minlength=len(out))
 
-    def jacobian(self, model, x, v, t):
+    def jacobian(self, model: Model, x: np.ndarray, v: np.ndarray,
+                 t: float) -> tuple[sparse.spmatrix | None, sparse.spmatrix | None]:
         """``(dF/dx, dF/dv)``, each a (3n, 3n) csr matrix, or ``(None, None)`` without active contacts."""
         found = self.contacts(x)
         if not found.count:
@@ -235,7 +241,7 @@ class _PenaltyResponse:
         nodes, weights, n = found.nodes[keep], found.weights[keep], self.model.node_count
         return _stencil_matrix(nodes, weights, dfdx, n), _stencil_matrix(nodes, weights, dfdv, n)
 
-    def potential_energy(self, model, x, t) -> float:
+    def potential_energy(self, model: Model, x: np.ndarray, t: float) -> float:
         """Penalty energy ``sum k_c d^2 / 2`` [J] (exact where the depth is a distance to a flat surface)."""
         found = self.contacts(x)
         return float(0.5 * np.dot(found.stiffness, found.depth ** 2))

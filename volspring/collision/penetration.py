@@ -41,6 +41,10 @@ from meshing.tolerances import CANCELLED, ON_SURFACE
 from volspring.collision.bodies import CollisionBodies
 from volspring.collision.spatial_hash import DEFAULT_TABLE_SIZE, SpatialHash, VertexTetContacts, expand_ranges
 from volspring.collision.triangles import segment_triangle_intersections
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["PenetrationDepths", "closest_surface_depths", "consistent_penetration_depths"]
 
@@ -156,7 +160,8 @@ def _empty_hits():
     return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3))
 
 
-def closest_surface_depths(bodies: CollisionBodies, positions, contacts: VertexTetContacts) -> PenetrationDepths:
+def closest_surface_depths(bodies: CollisionBodies, positions: ArrayLike,
+                           contacts: VertexTetContacts) -> PenetrationDepths:
     """Naive depths: distance to, and direction towards, the nearest point of the penetrated body's surface.
 
     Parameters
@@ -217,8 +222,9 @@ def _edge_surface_hits(bodies, x, start_vertex, end_vertex, body, *, cell_size, 
     return segment, point, normal
 
 
-def consistent_penetration_depths(bodies: CollisionBodies, positions, contacts: VertexTetContacts, *,
-                                  cell_size=None, table_size=DEFAULT_TABLE_SIZE) -> PenetrationDepths:
+def consistent_penetration_depths(bodies: CollisionBodies, positions: ArrayLike, contacts: VertexTetContacts, *,
+                                  cell_size: float | None = None,
+                                  table_size: int = DEFAULT_TABLE_SIZE) -> PenetrationDepths:
     """Consistent penetration depths of all colliding points (Heidelberger et al. 2004).
 
     Parameters

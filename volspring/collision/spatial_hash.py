@@ -17,6 +17,10 @@ import numpy as np
 
 from meshing.geometry import barycentric_frames
 from volspring.collision.bodies import CollisionBodies
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["HASH_PRIMES", "DEFAULT_TABLE_SIZE", "SpatialHash", "VertexTetContacts", "cell_hash", "detect_collisions"]
 
@@ -29,7 +33,7 @@ DEFAULT_TABLE_SIZE = 2_147_483_647
 _GROUP_RULES = ("all", "other", "same")
 
 
-def cell_hash(cells, table_size=DEFAULT_TABLE_SIZE) -> np.ndarray:
+def cell_hash(cells: ArrayLike, table_size: int = DEFAULT_TABLE_SIZE) -> np.ndarray:
     """Teschner's hash of integer cells: ``(i p1 xor j p2 xor k p3) mod table_size``.
 
     Parameters
@@ -106,7 +110,8 @@ class SpatialHash:
     entry_cell: np.ndarray  # (K, 3) int64, real cell of each sorted entry
 
     @classmethod
-    def build(cls, item_lo, item_hi, *, cell_size, table_size=DEFAULT_TABLE_SIZE, item_group=None) -> "SpatialHash":
+    def build(cls, item_lo: np.ndarray, item_hi: np.ndarray, *, cell_size: float | None,
+              table_size: int = DEFAULT_TABLE_SIZE, item_group: np.ndarray | None = None) -> "SpatialHash":
         """Enter boxes ``[item_lo, item_hi]`` ((k, 3) float [m]) in every cell they cover.
 
         ``item_group`` ((k,) int, default all 0) tags each item, e.g. with its body id, so that
@@ -127,7 +132,8 @@ class SpatialHash:
         return cls(float(cell_size), table_size, group_count, item_lo, item_hi, cell_lo,
                    keys[order], owner[order], cells[order])
 
-    def query(self, query_lo, query_hi, *, query_group=None, rule="all") -> tuple[np.ndarray, np.ndarray]:
+    def query(self, query_lo: ArrayLike, query_hi: ArrayLike, *, query_group: ArrayLike | None = None,
+              rule: str = "all") -> tuple[np.ndarray, np.ndarray]:
         """All overlapping (query, item) box pairs.
 
         Parameters
@@ -216,8 +222,8 @@ class VertexTetContacts:
         return np.unique(self.vertex)
 
 
-def detect_collisions(bodies: CollisionBodies, positions, *, cell_size=None, table_size=DEFAULT_TABLE_SIZE,
-                      self_collision=False) -> VertexTetContacts:
+def detect_collisions(bodies: CollisionBodies, positions: ArrayLike, *, cell_size: float | None = None,
+                      table_size: int = DEFAULT_TABLE_SIZE, self_collision: bool = False) -> VertexTetContacts:
     """Find every vertex inside a tet of another body (Teschner et al. 2003).
 
     Pass 1 hashes every vertex into the grid cell it lies in; pass 2 visits the cells covered by

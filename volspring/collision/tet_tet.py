@@ -39,6 +39,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshing.mesh import TET_EDGES, TET_FACES
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.collision.bodies import CollisionBodies
+    from volspring.collision.spatial_hash import VertexTetContacts
 
 __all__ = ["NEAR_COPLANAR", "EdgeCrossingContacts", "EdgeFaceCrossings", "TetPairs", "crossing_tet_pairs",
            "edge_crossing_contacts", "edge_face_crossings", "tets_intersect"]
@@ -192,7 +197,8 @@ def _chunks(count):
     return [slice(start, min(start + _CHUNK, count)) for start in range(0, count, _CHUNK)] or [slice(0, 0)]
 
 
-def tets_intersect(a, b, *, return_vertex_inside=False):
+def tets_intersect(a: np.ndarray, b: np.ndarray, *,
+                   return_vertex_inside: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Whether each pair of closed tets intersects (touching counts), by vertex-in-tet and edge-through-face.
 
     Parameters
@@ -280,7 +286,7 @@ class EdgeFaceCrossings:
         return len(self.pair)
 
 
-def edge_face_crossings(a, b) -> EdgeFaceCrossings:
+def edge_face_crossings(a: np.ndarray, b: np.ndarray) -> EdgeFaceCrossings:
     """Every transversal crossing of an edge of one tet with a face of the other, over all pairs.
 
     A response needs them for the pairs :func:`tets_intersect` finds with no vertex inside (they
@@ -379,8 +385,8 @@ class TetPairs:
         return len(self.tet_a)
 
 
-def crossing_tet_pairs(bodies, positions, *, cell_size=None, table_size=None, self_collision=False,
-                       boundary=False) -> TetPairs:
+def crossing_tet_pairs(bodies: CollisionBodies, positions: np.ndarray, *, cell_size: float | None = None,
+                       table_size: int | None = None, self_collision: bool = False, boundary: bool = False) -> TetPairs:
     """Every pair of intersecting tets of different bodies: spatial hash of tet boxes, then :func:`tets_intersect`.
 
     Parameters
@@ -508,7 +514,8 @@ class EdgeCrossingContacts:
         return len(self.vertex)
 
 
-def edge_crossing_contacts(bodies, positions, pairs: TetPairs, *, colliding=None) -> EdgeCrossingContacts:
+def edge_crossing_contacts(bodies: CollisionBodies, positions: np.ndarray, pairs: TetPairs, *,
+                           colliding: VertexTetContacts | None = None) -> EdgeCrossingContacts:
     """Penalty contacts of boundary edges crossing boundary faces of another body, from intersecting tet pairs.
 
     Every crossing of a boundary edge of body P with a boundary face of body Q lies in a pair of

@@ -60,6 +60,11 @@ from volspring.collision.penalty import (
     _positive,
 )
 from volspring.collision.spatial_hash import SpatialHash
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from volspring.model import Model
 
 __all__ = ["ClothSelfContactForce", "ThinContactForce"]
 
@@ -127,9 +132,10 @@ class ThinContactForce(_PenaltyResponse):
     True
     """
 
-    def __init__(self, model, *, thickness, nodes=None, stiffness=None, stiffness_factor=DEFAULT_STIFFNESS_FACTOR,
-                 damping_ratio=None, damping=None, friction=0.0, friction_velocity=DEFAULT_FRICTION_VELOCITY,
-                 cell_size=None):
+    def __init__(self, model: Model, *, thickness: float, nodes: ArrayLike | None = None,
+                 stiffness: float | None = None, stiffness_factor: float = DEFAULT_STIFFNESS_FACTOR,
+                 damping_ratio: float | None = None, damping: float | None = None, friction: float = 0.0,
+                 friction_velocity: float = DEFAULT_FRICTION_VELOCITY, cell_size: float | None = None):
         model = _as_model(model)
         super().__init__(model, stiffness=stiffness, stiffness_factor=stiffness_factor, damping_ratio=damping_ratio,
                          damping=damping, friction=friction, friction_velocity=friction_velocity)
@@ -261,8 +267,9 @@ class ClothSelfContactForce(_PenaltyResponse):
     (0.02, [0.0, 0.0, -1.0])
     """
 
-    def __init__(self, model, triangles, *, thickness, stiffness, damping_ratio=None, damping=None, friction=0.0,
-                 friction_velocity=DEFAULT_FRICTION_VELOCITY, cell_size=None):
+    def __init__(self, model: Model, triangles: ArrayLike, *, thickness: float, stiffness: float,
+                 damping_ratio: float | None = None, damping: float | None = None, friction: float = 0.0,
+                 friction_velocity: float = DEFAULT_FRICTION_VELOCITY, cell_size: float | None = None):
         model = _as_model(model)
         super().__init__(model, stiffness=stiffness, stiffness_factor=1.0, damping_ratio=damping_ratio,
                          damping=damping, friction=friction, friction_velocity=friction_velocity)

@@ -24,7 +24,8 @@ def _dot(a, b):
     return np.einsum("...i,...i->...", a, b)
 
 
-def segment_triangle_intersections(start, end, v0, v1, v2, *, tolerance=ON_SURFACE):
+def segment_triangle_intersections(start: np.ndarray, end: np.ndarray, v0: np.ndarray, v1: np.ndarray, v2: np.ndarray,
+                                   *, tolerance: float = ON_SURFACE) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Moeller-Trumbore intersection of segments with triangles, pairwise.
 
     Parameters

@@ -79,6 +79,10 @@ import numpy as np
 from volspring.elements.base import ElementSet, Linearization
 from volspring.elements.springs import per_item_array
 from volspring.material import _real_array, _shown
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["AngleSprings", "DihedralSprings", "dihedral_angles", "joint_angles"]
 
@@ -90,7 +94,7 @@ SINE_FLOOR = 1e-12
 #: Joints per chunk when the node blocks are formed (:func:`_node_blocks`): 1024 x 81 values stay in cache.
 NODE_BLOCK_CHUNK = 1024
 
-def joint_angles(x, triples) -> np.ndarray:
+def joint_angles(x: np.ndarray, triples: ArrayLike) -> np.ndarray:
     """(e,) float -- the angle theta at j between j->i and j->k of each triple (i, j, k) [rad], pi when straight.
 
     >>> import numpy as np
@@ -151,7 +155,7 @@ class AngleSprings(ElementSet):
                        "[0, pi] (pi is straight)")
 
     @classmethod
-    def at_rest(cls, positions, triples, stiffness) -> "AngleSprings":
+    def at_rest(cls, positions: ArrayLike, triples: ArrayLike, stiffness: float | ArrayLike) -> "AngleSprings":
         """Joints whose rest angles are the angles in ``positions`` (n, 3) [m] (the rest shape)."""
         positions = np.asarray(positions, dtype=np.float64)
         triples = _checked_triples(triples, len(positions))
@@ -166,24 +170,25 @@ class AngleSprings(ElementSet):
     def joint_count(self) -> int:
         return len(self.triples)
 
-    def angles(self, x) -> np.ndarray:
+    def angles(self, x: np.ndarray) -> np.ndarray:
         """(e,) float -- theta of every joint at positions x [rad]."""
         return np.pi - self._kinematics(x)[-1]
 
-    def energy(self, x) -> float:
+    def energy(self, x: np.ndarray) -> float:
         """Bending energy sum k / 2 (theta - theta0)^2 [J]."""
         phi = self._kinematics(x)[-1]
         return float(0.5 * np.dot(self.stiffness, (phi - (np.pi - self.rest_angles)) ** 2))
 
-    def forces(self, x, v=None) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """(n, 3) float -- bending forces on the nodes [N] (``v`` is not used: no dampers)."""
         return self._evaluate(x, hessian=False)[0]
 
-    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+    def stiffness_blocks(self, x: np.ndarray, *, clamp_compression: bool = True) -> np.ndarray:
         """(e, 9, 3, 3) float -- the Hessian of every joint [N/m], projected to PSD when ``clamp_compression``."""
         return _node_blocks(*self._evaluate(x, hessian=True, project=clamp_compression)[1])
 
-    def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0, clamp_compression=True):
+    def linearize(self, x: np.ndarray, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
+                  damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
         forces, edge_blocks = self._evaluate(x, hessian=True, project=clamp_compression)
         return _JointLinearization(forces, edge_blocks, stiffness_scale, self)
 
@@ -417,7 +422,7 @@ def _checked_chains(name, chains, node_count, k) -> np.ndarray:
     return array
 
 
-def dihedral_angles(x, quads) -> np.ndarray:
+def dihedral_angles(x: np.ndarray, quads: ArrayLike) -> np.ndarray:
     """(e,) float -- the signed dihedral angle psi of each (h, i, j, k) about the edge i -> j [rad], in (-pi, pi]:
     the angle from the plane (h, i, j) to the plane (i, j, k), 0 when h and k are on one side (a planar C)."""
     x = np.asarray(x, dtype=np.float64)
@@ -468,7 +473,7 @@ class DihedralSprings(ElementSet):
                        "[-pi, pi]")
 
     @classmethod
-    def at_rest(cls, positions, quads, stiffness) -> "DihedralSprings":
+    def at_rest(cls, positions: ArrayLike, quads: ArrayLike, stiffness: float | ArrayLike) -> "DihedralSprings":
         """Springs whose rest angles are the dihedral angles in ``positions`` (n, 3) [m]."""
         positions = np.asarray(positions, dtype=np.float64)
         quads = _checked_chains("quads", quads, len(positions), 4)
@@ -499,20 +504,20 @@ class DihedralSprings(ElementSet):
         g2 = s1 * g0 - (s3 + 1.0) * g3
         return change, np.stack([g0, g1, g2, g3], axis=1)
 
-    def angles(self, x) -> np.ndarray:
+    def angles(self, x: np.ndarray) -> np.ndarray:
         """(e,) float -- psi of every spring at positions x [rad]."""
         return dihedral_angles(x, self.quads)
 
-    def energy(self, x) -> float:
+    def energy(self, x: np.ndarray) -> float:
         change, _ = self._twist(x)
         return float(0.5 * np.dot(self.stiffness, change**2))
 
-    def forces(self, x, v=None) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """(n, 3) float -- twist forces on the nodes [N] (no dampers)."""
         change, gradient = self._twist(x)
         return _scatter(self.quads, -(self.stiffness * change)[:, None, None] * gradient, self.node_count)
 
-    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+    def stiffness_blocks(self, x: np.ndarray, *, clamp_compression: bool = True) -> np.ndarray:
         """(e, 16, 3, 3) float -- the Gauss-Newton blocks k grad psi grad psi^T [N/m]."""
         _, gradient = self._twist(x)
         blocks = self.stiffness[:, None, None, None, None] * gradient[:, :, None, :, None] * gradient[:, None, :, None, :]

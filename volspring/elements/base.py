@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-
+from collections.abc import Callable
 __all__ = ["BlockMap", "ElementSet", "Linearization", "OperatorLinearization"]
 
 
@@ -83,10 +83,11 @@ class Linearization:
         whose stencil and block map the blocks follow
     """
 
-    def __init__(self, forces, blocks, stiffness, element_set):
+    def __init__(self, forces: np.ndarray, blocks: np.ndarray | None, stiffness: np.ndarray | None,
+                 element_set: ElementSet):
         self.forces, self.blocks, self.stiffness, self.element_set = forces, blocks, stiffness, element_set
 
-    def dfdx_times(self, u) -> np.ndarray:
+    def dfdx_times(self, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- dF/dx @ u: the change of the set's forces per unit displacement u [N]."""
         return -_block_product(self.element_set, self.stiffness, u)
 
@@ -111,14 +112,15 @@ class OperatorLinearization(Linearization):
         ``preconditioner() -> (e, b, 3, 3)`` stand-in blocks, already scaled
     """
 
-    def __init__(self, forces, times, scale, element_set, preconditioner):
+    def __init__(self, forces: np.ndarray, times: Callable[[np.ndarray], np.ndarray], scale: float,
+                 element_set: ElementSet, preconditioner: Callable[[], np.ndarray] | None):
         super().__init__(forces, None, None, element_set)
         self._times, self.scale, self._preconditioner = times, float(scale), preconditioner
 
-    def dfdx_times(self, u) -> np.ndarray:
+    def dfdx_times(self, u: np.ndarray) -> np.ndarray:
         return -self._times(u)
 
-    def scaled_times(self, u) -> np.ndarray:
+    def scaled_times(self, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- (c_K K + c_D C) u."""
         return self.scale * self._times(u)
 
@@ -173,16 +175,16 @@ class ElementSet(ABC):
         return BlockMap.full(self.stencil.shape[1])
 
     @abstractmethod
-    def forces(self, x, v=None) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """(n, 3) float -- the set's forces on every node at positions x and velocities v [N]
         (without v: the elastic part only)."""
 
     @abstractmethod
-    def energy(self, x) -> float:
+    def energy(self, x: np.ndarray) -> float:
         """Potential energy of the set at positions x [J]."""
 
     @abstractmethod
-    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+    def stiffness_blocks(self, x: np.ndarray, *, clamp_compression: bool = True) -> np.ndarray:
         """(e, b, 3, 3) float -- K_e = -dF/dx of each element in the block layout [N/m].
 
         ``clamp_compression`` asks for a positive semi-definite approximation where the exact
@@ -190,11 +192,12 @@ class ElementSet(ABC):
         term ignore it.
         """
 
-    def damping_blocks(self, x) -> np.ndarray | None:
+    def damping_blocks(self, x: np.ndarray) -> np.ndarray | None:
         """(e, b, 3, 3) float -- C_e = -dF/dv of each element [N s/m], or None when the set does not damp."""
         return None
 
-    def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0, clamp_compression=True):
+    def linearize(self, x: np.ndarray, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
+                  damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
         """Forces and the blocks c_K K_e + c_D C_e in one call (sets with a faster joint pass override it).
 
         Parameters
@@ -222,7 +225,7 @@ class ElementSet(ABC):
                 blocks = blocks + damping_scale * damping
         return Linearization(self.forces(x, v), blocks, stiffness, self)
 
-    def renumbered(self, node_rank):
+    def renumbered(self, node_rank: np.ndarray) -> tuple[ElementSet, np.ndarray] | None:
         """The set in another node numbering, elements reordered for locality, and the element order;
         None (the default) when the set is evaluated in the model's numbering.
 
@@ -232,7 +235,7 @@ class ElementSet(ABC):
         """
         return None
 
-    def supported(self, held) -> "ElementSet":
+    def supported(self, held: np.ndarray) -> "ElementSet":
         """The set a scene uses once its supports hold the nodes ``held`` ((n,) bool: all three components
         prescribed); the set itself by default. A set whose discretisation depends on the supports
         (:meth:`volspring.elements.NodalStrain.supported`) returns an adapted copy."""

@@ -44,6 +44,10 @@ import scipy.sparse as sp
 from volspring.elements.base import BlockMap, ElementSet, Linearization, OperatorLinearization
 from volspring.elements.tet_kinematics import SmoothingDomains, TetGradients, corotational, pair_nodes
 from volspring.material import _real_array, _real_number
+from typing import TYPE_CHECKING, Self
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["CorotatedTets", "NodalStrain"]
 
@@ -95,7 +99,7 @@ class _TetContinuum(ElementSet):
         """(T, 4) int -- the tets: the stand-in blocks of :meth:`preconditioner_blocks` couple the 1-ring only."""
         return self.kinematics.tets
 
-    def damping_blocks(self, x) -> np.ndarray | None:
+    def damping_blocks(self, x: np.ndarray) -> np.ndarray | None:
         if not self.stiffness_damping:
             return None
         return self.stiffness_damping * self.stiffness_blocks(x)
@@ -108,7 +112,7 @@ class _TetContinuum(ElementSet):
         scale = self._scale(stiffness_scale, damping_scale)
         return OperatorLinearization(forces, times, scale, self, lambda: scale * self.preconditioner_blocks(x))
 
-    def with_stiffness_damping(self, b):
+    def with_stiffness_damping(self, b: float) -> Self:
         """A copy with Rayleigh stiffness damping b [s] (the kinematics and domains are shared)."""
         copy = object.__new__(type(self))
         copy.__dict__.update(self.__dict__)
@@ -143,7 +147,8 @@ class CorotatedTets(_TetContinuum):
 
     name = "corotated tets"
 
-    def __init__(self, rest_positions, tets, shear, *, stiffness_damping=0.0):
+    def __init__(self, rest_positions: ArrayLike, tets: ArrayLike, shear: float | ArrayLike, *,
+                 stiffness_damping: float = 0.0):
         rest = np.asarray(rest_positions, dtype=np.float64)
         self.node_count = len(rest)
         self.kinematics = TetGradients.at_rest(rest, tets)
@@ -151,7 +156,8 @@ class CorotatedTets(_TetContinuum):
         self.stiffness_damping = _damping_time(stiffness_damping)
 
     @classmethod
-    def from_kinematics(cls, kinematics, node_count, shear, *, stiffness_damping=0.0) -> "CorotatedTets":
+    def from_kinematics(cls, kinematics: TetGradients, node_count: int, shear: float | ArrayLike, *,
+                        stiffness_damping: float = 0.0) -> "CorotatedTets":
         """The set on tets whose :class:`TetGradients` are already computed (shared, not copied)."""
         tets = object.__new__(cls)
         tets.node_count, tets.kinematics = int(node_count), kinematics
@@ -166,14 +172,14 @@ class CorotatedTets(_TetContinuum):
     def _weights(self):
         return self.kinematics.volumes * self.shear
 
-    def energy(self, x) -> float:
+    def energy(self, x: np.ndarray) -> float:
         psi, *_ = corotational(self.kinematics.deformation(np.asarray(x, dtype=np.float64)))
         return float(self._weights() @ psi)
 
     def _forces_from(self, P):
         return -self.kinematics.spread(self._weights()[:, None, None] * P, self.node_count)
 
-    def forces(self, x, v=None) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
         _, P, twists, coefficients = corotational(self.kinematics.deformation(x))
         forces = self._forces_from(P)
@@ -196,12 +202,13 @@ class CorotatedTets(_TetContinuum):
         blocks = dots[..., None, None] * np.eye(3) - twist
         return (2.0 * self._weights())[:, None, None, None, None] * blocks
 
-    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+    def stiffness_blocks(self, x: np.ndarray, *, clamp_compression: bool = True) -> np.ndarray:
         _, _, twists, coefficients = corotational(self.kinematics.deformation(np.asarray(x, dtype=np.float64)),
                                                   project=clamp_compression)
         return self._blocks(twists, coefficients).reshape(-1, 16, 3, 3)
 
-    def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0, clamp_compression=True):
+    def linearize(self, x: ArrayLike, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
+                  damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
         x = np.asarray(x, dtype=np.float64)
         F = self.kinematics.deformation(x)
         _, P, twists, coefficients = corotational(F, project=clamp_compression)
@@ -212,18 +219,19 @@ class CorotatedTets(_TetContinuum):
             forces += self._damping_forces(*projected, v)
         return Linearization(forces, self._scale(stiffness_scale, damping_scale) * stiffness, stiffness, self)
 
-    def placed(self, rest_positions, node_map) -> "CorotatedTets":
+    def placed(self, rest_positions: np.ndarray, node_map: ArrayLike) -> "CorotatedTets":
         """The same tets and coefficients in another node numbering (``node_map[i]``: the new index of node i)
         and on other rest positions (the body moved rigidly into a scene)."""
         return CorotatedTets(rest_positions, np.asarray(node_map)[self.kinematics.tets], self.shear,
                              stiffness_damping=self.stiffness_damping)
 
     # ------------------------------------------------------------------ matrix-free
-    def preconditioner_blocks(self, x) -> np.ndarray:
+    def preconditioner_blocks(self, x: np.ndarray) -> np.ndarray:
         """(T, 16, 3, 3) -- the projected stiffness blocks themselves (already on the 1-ring)."""
         return self.stiffness_blocks(x)
 
-    def linearize_operator(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0):
+    def linearize_operator(self, x: np.ndarray, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
+                           damping_scale: float = 0.0) -> OperatorLinearization:
         """Forces at (x, v) and the projected stiffness as a product (:class:`OperatorLinearization`).
 
         The blocks are K_ab = 2 w (g_a . g_b) I - sum_r 2 w c_r (q_r g_a)(q_r g_b)^T (w = V_t mu_t): a constant
@@ -314,8 +322,9 @@ class NodalStrain(_TetContinuum):
     #: Weight of the per-tet volume term in the preconditioner's stand-in (see :meth:`preconditioner_blocks`).
     PRECONDITIONER_BULK = 1.0
 
-    def __init__(self, rest_positions, tets, shear, bulk, *, regions=None, clusters=None, held=None,
-                 stiffness_damping=0.0):
+    def __init__(self, rest_positions: ArrayLike, tets: ArrayLike, shear: float | ArrayLike, bulk: float | ArrayLike,
+                 *, regions: ArrayLike | None = None, clusters: ArrayLike | str | None = None,
+                 held: ArrayLike | None = None, stiffness_damping: float = 0.0):
         rest = np.array(rest_positions, dtype=np.float64)
         rest.setflags(write=False)
         self.node_count = len(rest)
@@ -407,7 +416,7 @@ class NodalStrain(_TetContinuum):
             state.update(psi=psi, P=P, twists=twists, coefficients=coefficients)
         return state
 
-    def energy(self, x) -> float:
+    def energy(self, x: np.ndarray) -> float:
         state = self._state(np.asarray(x, dtype=np.float64), True)
         V = self.domains.volumes
         total = 0.5 * float((self.bulk * V) @ (state["J"] - 1.0) ** 2) if "J" in state else 0.0
@@ -432,7 +441,7 @@ class NodalStrain(_TetContinuum):
             forces -= self.domains.spread((self.shear * self.domains.volumes)[:, None, None] * state["P"])
         return forces
 
-    def forces(self, x, v=None) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
         state = self._state(x, True)
         forces = self._forces(state)
@@ -523,11 +532,12 @@ class NodalStrain(_TetContinuum):
             out[:, k] = np.bincount(pair.ravel(), weights=flat[:, k], minlength=len(out))
         return out.reshape(-1, 3, 3)
 
-    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+    def stiffness_blocks(self, x: np.ndarray, *, clamp_compression: bool = True) -> np.ndarray:
         state = self._state(np.asarray(x, dtype=np.float64), clamp_compression)
         return self._blocks(state, not clamp_compression)
 
-    def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0, clamp_compression=True):
+    def linearize(self, x: ArrayLike, v: ArrayLike | None = None, *, stiffness_scale: float = 1.0,
+                  damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
         x = np.asarray(x, dtype=np.float64)
         state = self._state(x, clamp_compression)
         forces = self._forces(state)
@@ -544,7 +554,7 @@ class NodalStrain(_TetContinuum):
         corner = self.domains.corner_domain[:, 0]
         return CorotatedTets.from_kinematics(self.kinematics, self.node_count, self.shear[corner]), self.bulk[corner]
 
-    def preconditioner_blocks(self, x) -> np.ndarray:
+    def preconditioner_blocks(self, x: np.ndarray) -> np.ndarray:
         """(T, 16, 3, 3) -- a 1-ring stand-in for the projected stiffness, to build a preconditioner from.
 
         Per tet, the corotated shear ``V_t mu |F_t - R_t|^2`` and the Gauss-Newton part of a per-tet
@@ -567,7 +577,8 @@ class NodalStrain(_TetContinuum):
             blocks += (w[:, :, None, :, None] * w[:, None, :, None, :]).reshape(-1, 16, 3, 3)
         return blocks
 
-    def linearize_operator(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0):
+    def linearize_operator(self, x: np.ndarray, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
+                           damping_scale: float = 0.0) -> OperatorLinearization:
         """Forces at (x, v) and the projected stiffness as a product (:class:`OperatorLinearization`)."""
         x = np.asarray(x, dtype=np.float64)
         state = self._state(x, True)
@@ -587,7 +598,7 @@ class NodalStrain(_TetContinuum):
         return {"shear": self.shear[corner], "bulk": self.bulk[corner],
                 "regions": np.asarray(self.domains.region[corner], dtype=np.int64)}
 
-    def placed(self, rest_positions, node_map) -> "NodalStrain":
+    def placed(self, rest_positions: np.ndarray, node_map: ArrayLike) -> "NodalStrain":
         """The same set in another node numbering (``node_map[i]``: the new index of node i) and on other
         rest positions (the body moved rigidly into a scene); clusters follow their nodes."""
         node_map = np.asarray(node_map, dtype=np.int64)
@@ -601,7 +612,7 @@ class NodalStrain(_TetContinuum):
             held[node_map[:len(self.held)]] = self.held
         return self._with(rest_positions, node_map[self.kinematics.tets], clusters, held)
 
-    def supported(self, held) -> "NodalStrain":
+    def supported(self, held: ArrayLike) -> "NodalStrain":
         """With ``clusters="pairs"``, the set whose domains are the free nodes' when the supports hold the nodes
         ``held`` ((n,) bool; those of a set of other nodes need not be held); any other set is itself.
 
@@ -623,7 +634,7 @@ class NodalStrain(_TetContinuum):
         result.cluster_rule = self.cluster_rule
         return result
 
-    def volume_ratios(self, x) -> np.ndarray:
+    def volume_ratios(self, x: np.ndarray) -> np.ndarray:
         """(d,) float -- J_d = v_d / V_d of every smoothing domain at positions x."""
         return self._state(np.asarray(x, dtype=np.float64), True, volume=True)["J"]
 

@@ -37,6 +37,11 @@ import numpy as np
 
 from meshing.topology import SPRING_KINDS
 from volspring.elements.springs import Springs
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from meshing.topology import SpringTopology
+    from volspring.material import Material
 
 __all__ = ["FORCE_LAWS", "NU_IGNORING_RULES", "STIFFNESS_RULES", "springs_from_topology"]
 
@@ -46,8 +51,9 @@ NU_IGNORING_RULES = STIFFNESS_RULES
 FORCE_LAWS = ("hooke", "strain")
 
 
-def springs_from_topology(topology, material, *, rule, stiffness=None, law="hooke", damping_ratio=None,
-                          damping=None, tet_moduli=None, tet_densities=None) -> tuple:
+def springs_from_topology(topology: SpringTopology, material: Material, *, rule: str, stiffness: float | None = None,
+                          law: str = "hooke", damping_ratio: float | None = None, damping: float | None = None,
+                          tet_moduli: np.ndarray | None = None, tet_densities: np.ndarray | None = None) -> tuple:
     """Masses and springs of a (checked) topology and material by a stiffness rule.
 
     Parameters

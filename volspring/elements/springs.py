@@ -103,32 +103,32 @@ class Springs(ElementSet):
         return BlockMap(np.array([0, 1, 0, 1]), np.array([0, 1, 1, 0]), np.zeros(4, dtype=np.int64),
                         np.array([1.0, 1.0, -1.0, -1.0]), 1)
 
-    def forces(self, x, v=None) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray | None = None) -> np.ndarray:
         """(n, 3) float -- spring (and damper, with ``v``) forces on the nodes [N]."""
         r, length = self._directions(x)
         return self.incidence @ (self._magnitudes(r, length, v)[:, None] * r)
 
-    def energy(self, x) -> float:
+    def energy(self, x: np.ndarray) -> float:
         """Elastic energy sum 1/2 k_e (l - l0)^2 [J]."""
         _, length = self._directions(x)
         return float(0.5 * np.dot(self.stiffness, (length - self.rest_lengths) ** 2))
 
-    def strains(self, x) -> np.ndarray:
+    def strains(self, x: np.ndarray) -> np.ndarray:
         """(s,) float -- engineering strain (l - l0) / l0 of each spring [-]."""
         _, length = self._directions(x)
         return length / self.rest_lengths - 1.0
 
-    def stiffness_blocks(self, x, *, clamp_compression=True) -> np.ndarray:
+    def stiffness_blocks(self, x: np.ndarray, *, clamp_compression: bool = True) -> np.ndarray:
         """(s, 3, 3) float -- H of each spring [N/m] (see the module docstring)."""
         return self.linearize(x, clamp_compression=clamp_compression).blocks
 
-    def damping_blocks(self, x) -> np.ndarray:
+    def damping_blocks(self, x: np.ndarray) -> np.ndarray:
         """(s, 3, 3) float -- D = k_d r r^T of each spring [N s/m]."""
         r, _ = self._directions(x)
         return self.damping[:, None, None] * r[:, :, None] * r[:, None, :]
 
-    def linearize(self, x, v=None, *, stiffness_scale=1.0, damping_scale=0.0,
-                  clamp_compression=True) -> "SpringLinearization":
+    def linearize(self, x: np.ndarray, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
+                  damping_scale: float = 0.0, clamp_compression: bool = True) -> "SpringLinearization":
         """Forces and the blocks c_K H_e + c_D D_e in one pass over the springs.
 
         Parameters
@@ -157,7 +157,7 @@ class Springs(ElementSet):
         blocks.reshape(-1, 9)[:, ::4] += (stiffness_scale * transverse)[:, None]
         return SpringLinearization(forces, blocks, None, self, r, length, self.stiffness, transverse)
 
-    def renumbered(self, node_rank, node_count=None) -> tuple:
+    def renumbered(self, node_rank: np.ndarray, node_count: int | None = None) -> tuple:
         """The same springs in another node numbering, sorted by their first node there.
 
         Parameters
@@ -243,11 +243,12 @@ class SpringLinearization(Linearization):
         k_e (1 - l0/l), clamped if asked: coefficient of the transverse projector I - r r^T in H_e [N/m]
     """
 
-    def __init__(self, forces, blocks, stiffness, element_set, directions, lengths, axial, transverse):
+    def __init__(self, forces: np.ndarray, blocks: np.ndarray, stiffness: np.ndarray | None, element_set: ElementSet,
+                 directions: np.ndarray, lengths: np.ndarray, axial: np.ndarray, transverse: np.ndarray):
         super().__init__(forces, blocks, stiffness, element_set)
         self.directions, self.lengths, self.axial, self.transverse = directions, lengths, axial, transverse
 
-    def dfdx_times(self, u) -> np.ndarray:
+    def dfdx_times(self, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- dF/dx @ u [N]: H_e (u_j - u_i) = (k - k_t) r (r . du) + k_t du, added
         to node i and subtracted from node j."""
         springs = self.element_set

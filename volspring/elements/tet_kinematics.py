@@ -24,6 +24,10 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["SmoothingDomains", "TetGradients", "corotational", "domain_pairs", "pair_nodes", "rotation_preserving_svd"]
 
@@ -49,7 +53,7 @@ class TetGradients:
     gradients: np.ndarray
 
     @classmethod
-    def at_rest(cls, rest_positions, tets, *, owner="tets") -> "TetGradients":
+    def at_rest(cls, rest_positions: np.ndarray, tets: np.ndarray, *, owner: str = "tets") -> "TetGradients":
         """The gradients of ``tets`` at ``rest_positions``; a ValueError names the first tet that is not
         positively oriented with a non-zero volume (``owner`` names the array in the message)."""
         tets = np.asarray(tets, dtype=np.int64)
@@ -85,7 +89,7 @@ class TetGradients:
                          for j in range(3))
         return matrices, tuple(matrix.T.tocsr() for matrix in matrices)
 
-    def deformation(self, x) -> np.ndarray:
+    def deformation(self, x: np.ndarray) -> np.ndarray:
         """(T, 3, 3) float -- F_t at positions x."""
         x = np.asarray(x, dtype=np.float64)
         matrices, _ = self._columns
@@ -94,7 +98,7 @@ class TetGradients:
         x = x[:matrices[0].shape[1]]
         return np.stack([G @ x for G in matrices], axis=2)
 
-    def spread(self, stress, node_count) -> np.ndarray:
+    def spread(self, stress: np.ndarray, node_count: int) -> np.ndarray:
         """(n, 3) float -- sum_t stress_t g_ta per node a, for (T, 3, 3) ``stress`` (the transpose of
         :meth:`deformation`: a tet set's forces are ``-spread(V_t P_t)``)."""
         _, transposed = self._columns
@@ -154,7 +158,7 @@ def _jacobi_eigh(C, sweeps=_JACOBI_SWEEPS):
     return values, np.stack([np.stack(row, axis=1) for row in V], axis=1), converged
 
 
-def rotation_preserving_svd(F):
+def rotation_preserving_svd(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """F = U diag(s) V^T with det U = det V = 1 for (m, 3, 3) F; an inverted F has s_3 < 0.
 
     Well-conditioned F with det F > 0 (nearly every tet of a simulation) take the fast path: V and s^2
@@ -192,7 +196,7 @@ def _det3(M):
             + M[:, 0, 2] * (M[:, 1, 0] * M[:, 2, 1] - M[:, 1, 1] * M[:, 2, 0]))
 
 
-def corotational(F, *, project=True):
+def corotational(F: np.ndarray, *, project: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The corotational density psi = |F - R|^2 of each F, its gradient and Hessian pieces.
 
     Parameters
@@ -271,7 +275,8 @@ class SmoothingDomains:
         to 1)
     """
 
-    def __init__(self, gradients: TetGradients, node_count: int, regions=None, clusters=None, held=None):
+    def __init__(self, gradients: TetGradients, node_count: int, regions: ArrayLike | None = None,
+                 clusters: ArrayLike | None = None, held: ArrayLike | None = None):
         tets = gradients.tets
         T = len(tets)
         regions = np.zeros(T, dtype=np.int64) if regions is None else np.asarray(regions, dtype=np.int64)
@@ -307,7 +312,7 @@ class SmoothingDomains:
     def domain_count(self) -> int:
         return len(self.node)
 
-    def sum_to_ring(self, per_corner_pair) -> np.ndarray:
+    def sum_to_ring(self, per_corner_pair: np.ndarray) -> np.ndarray:
         """(r, 3) float -- the sum of (T, 4, 4, 3) values per (domain corner, ring corner) into ring entries."""
         flat = np.broadcast_to(per_corner_pair, self.corner_entry.shape + (3,)).reshape(-1, 3)
         entries = self.corner_entry.ravel()
@@ -326,11 +331,11 @@ class SmoothingDomains:
     def _spreading(self):
         return tuple(G.T.tocsr() for G in self._averaging)
 
-    def averaged(self, x) -> np.ndarray:
+    def averaged(self, x: np.ndarray) -> np.ndarray:
         """(d, 3, 3) float -- Fbar_d at positions x."""
         return np.stack([G @ x for G in self._averaging], axis=2)
 
-    def spread(self, stress) -> np.ndarray:
+    def spread(self, stress: np.ndarray) -> np.ndarray:
         """(n, 3) float -- sum_d stress_d gbar_da per node a, for (d, 3, 3) ``stress`` (the transpose of
         :meth:`averaged`: forces are ``-spread(V_d P_d)``)."""
         return sum(Gt @ np.ascontiguousarray(stress[:, :, k]) for k, Gt in enumerate(self._spreading))
@@ -351,7 +356,7 @@ class SmoothingDomains:
         return domain_pairs(counts)
 
 
-def pair_nodes(points, tets) -> np.ndarray:
+def pair_nodes(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
     """(n,) int -- a cluster label per node: nodes matched in pairs along tet edges, the shortest edges first.
 
     Rounds of mutual proposals (every unmatched node proposes along its shortest edge to an unmatched
@@ -398,7 +403,7 @@ def pair_nodes(points, tets) -> np.ndarray:
     return label
 
 
-def domain_pairs(counts) -> tuple:
+def domain_pairs(counts: np.ndarray) -> tuple:
     """All ordered pairs (p, q) of entries within each group, for groups of ``counts`` consecutive entries.
 
     >>> [a.tolist() for a in domain_pairs(np.array([2, 1]))]

@@ -12,6 +12,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring.material import _real_array, _real_number, _shown
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.model import Model
 
 
 def masses_or_none(masses, *, allow_zero=False):
@@ -34,7 +38,7 @@ def masses_or_none(masses, *, allow_zero=False):
 class MassProportional:
     """Mixin of the fields f_i = m_i a_i: the masses given (0.1's form) or else the model's."""
 
-    def masses_of(self, model) -> np.ndarray:
+    def masses_of(self, model: Model) -> np.ndarray:
         """(n,) float -- the masses this field weighs with [kg]."""
         return model.masses if self.masses is None else self.masses
 

@@ -12,6 +12,11 @@ import numpy as np
 from volspring.forces._checks import (MassProportional, block_diagonal, finite, flag, masses_or_none,
                                       radial_blocks, vector)
 from volspring.forces.protocol import legacy_positional
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from scipy import sparse
+    from volspring.model import Model
 
 __all__ = ["POINT_FALLOFFS", "PointAttractor", "PointRepulser", "Vortex"]
 
@@ -95,7 +100,7 @@ class PointAttractor(MassProportional):
         r = np.sqrt(np.einsum("ij,ij->i", d, d))
         return d, r
 
-    def accelerations(self, x) -> np.ndarray:
+    def accelerations(self, x: np.ndarray) -> np.ndarray:
         """(n, 3) float -- the field's acceleration at positions x (n, 3) [m/s^2]."""
         d, r = self._geometry(x)
         S, R = self.sign * self.strength, self.radius
@@ -107,10 +112,10 @@ class PointAttractor(MassProportional):
             scale[inside] = S * (1.0 / r[inside] - 1.0 / R)
         return scale[:, None] * d
 
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray | None, t: float, out: np.ndarray) -> None:
         out += self.masses_of(model)[:, None] * self.accelerations(x)
 
-    def potential_energy(self, model, x, t) -> float:
+    def potential_energy(self, model: Model, x: np.ndarray, t: float) -> float:
         _, r = self._geometry(x)
         S, R = self.sign * self.strength, self.radius
         if self.falloff == "inverse_square":
@@ -119,7 +124,7 @@ class PointAttractor(MassProportional):
             per_mass = -S * np.maximum(R - r, 0.0) ** 2 / (2.0 * R)
         return float(np.dot(self.masses_of(model), per_mass))
 
-    def jacobian(self, model, x, v, t):
+    def jacobian(self, model: Model, x: np.ndarray, v: np.ndarray, t: float) -> tuple[sparse.spmatrix, None]:
         d, r = self._geometry(x)
         S, R = self.sign * self.strength, self.radius
         safe = np.where(r > 0, r, 1.0)
@@ -218,12 +223,12 @@ class Vortex(MassProportional):
         object.__setattr__(self, "strength", finite("strength", self.strength))
         object.__setattr__(self, "radius", finite("radius", self.radius, positive=True))
 
-    def accelerations(self, x) -> np.ndarray:
+    def accelerations(self, x: np.ndarray) -> np.ndarray:
         """(n, 3) float -- the field's acceleration at positions x (n, 3) [m/s^2]."""
         offset = x - self.point
         swirl = np.cross(self.axis, offset)  # a x (x - p) = a x rho, |a x rho| = rho
         rho2 = np.einsum("ij,ij->i", swirl, swirl)
         return (self.strength * 2.0 * self.radius / (rho2 + self.radius**2))[:, None] * swirl
 
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray | None, t: float, out: np.ndarray) -> None:
         out += self.masses_of(model)[:, None] * self.accelerations(x)

@@ -32,6 +32,13 @@ import warnings
 from typing import Protocol, runtime_checkable
 
 from volspring._deprecation import REMOVED_IN
+from typing import Any
+import numpy as np
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from scipy import sparse
+    from volspring.model import Model
 
 __all__ = ["Force", "HasJacobian", "HasPotential", "as_force"]
 
@@ -40,21 +47,22 @@ __all__ = ["Force", "HasJacobian", "HasPotential", "as_force"]
 class Force(Protocol):
     """An external force: ``accumulate(model, x, v, t, out)`` adds its (n, 3) forces [N] into ``out``."""
 
-    def accumulate(self, model, x, v, t, out) -> None: ...
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None: ...
 
 
 @runtime_checkable
 class HasJacobian(Protocol):
     """A force with ``jacobian(model, x, v, t) -> (dF_dx, dF_dv)``, (3n, 3n) sparse or None each."""
 
-    def jacobian(self, model, x, v, t): ...
+    def jacobian(self, model: Model, x: np.ndarray, v: np.ndarray,
+                 t: float) -> tuple[sparse.spmatrix | None, sparse.spmatrix | None]: ...
 
 
 @runtime_checkable
 class HasPotential(Protocol):
     """A conservative force with ``potential_energy(model, x, t) -> float`` [J]."""
 
-    def potential_energy(self, model, x, t) -> float: ...
+    def potential_energy(self, model: Model, x: np.ndarray, t: float) -> float: ...
 
 
 def _takes_model(method) -> bool:
@@ -84,7 +92,7 @@ class _ModelFreeForce:
         return repr(self.force)
 
 
-def as_force(force, *, name="force"):
+def as_force(force: Any, *, name: str = "force") -> Force:
     """``force`` under the current protocol: itself, or a 0.1 force wrapped with a DeprecationWarning.
 
     Raises

@@ -19,6 +19,11 @@ import scipy.sparse as sp
 from volspring.forces._checks import MassProportional, finite, masses_or_none, vector
 from volspring.forces.protocol import legacy_positional
 from volspring.material import _real_array, _real_number, _shown
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from scipy import sparse
+    from volspring.model import Model
 
 __all__ = ["Drag", "Gravity", "Wind"]
 
@@ -60,10 +65,10 @@ class Gravity(MassProportional):
         object.__setattr__(self, "masses", masses_or_none(self.masses, allow_zero=True))
         object.__setattr__(self, "g", vector("g", self.g))
 
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray | None, t: float, out: np.ndarray) -> None:
         out += self.masses_of(model)[:, None] * self.g
 
-    def potential_energy(self, model, x, t) -> float:
+    def potential_energy(self, model: Model, x: np.ndarray, t: float) -> float:
         return float(-np.dot(self.masses_of(model), x @ self.g))
 
 
@@ -90,10 +95,10 @@ class Drag(MassProportional):
             raise ValueError(f"drag rate = {rate} 1/s is not finite and >= 0")
         object.__setattr__(self, "rate", rate)
 
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         out -= self.rate * self.masses_of(model)[:, None] * v
 
-    def jacobian(self, model, x, v, t):
+    def jacobian(self, model: Model, x: np.ndarray, v: np.ndarray, t: float) -> tuple[None, sparse.spmatrix]:
         return None, sp.diags(np.repeat(-self.rate * self.masses_of(model), 3), format="csr")
 
 
@@ -164,7 +169,7 @@ class Wind(MassProportional):
         gusts.setflags(write=False)
         object.__setattr__(self, "gusts", gusts)
 
-    def wind_speed(self, t) -> float:
+    def wind_speed(self, t: float) -> float:
         """The wind speed |w(t)| along ``direction`` at time t [m/s] (may be negative)."""
         if callable(self.speed):
             mean = np.asarray(self.speed(t), dtype=np.float64)
@@ -178,12 +183,12 @@ class Wind(MassProportional):
             mean += float(np.sum(amplitude * np.sin(2.0 * np.pi * frequency * t + phase)))
         return mean
 
-    def wind_velocity(self, t) -> np.ndarray:
+    def wind_velocity(self, t: float) -> np.ndarray:
         """(3,) float -- the wind velocity w(t) [m/s]."""
         return self.wind_speed(t) * self.direction
 
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         out += (self.rate * self.masses_of(model))[:, None] * (self.wind_velocity(t) - v)
 
-    def jacobian(self, model, x, v, t):
+    def jacobian(self, model: Model, x: np.ndarray, v: np.ndarray, t: float) -> tuple[None, sparse.spmatrix]:
         return None, sp.diags(np.repeat(-self.rate * self.masses_of(model), 3), format="csr")

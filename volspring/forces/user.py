@@ -8,6 +8,10 @@ from typing import Callable
 import numpy as np
 
 from volspring.material import _shown
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.model import Model
 
 __all__ = ["CallableForce", "PointLoads"]
 
@@ -52,7 +56,7 @@ class CallableForce:
     def __repr__(self) -> str:
         return f"CallableForce({self.name})"
 
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         value = self.function(x, v, t)
         try:
             forces = np.asarray(value, dtype=np.float64)
@@ -99,8 +103,8 @@ class PointLoads:
         forces.setflags(write=False)
         object.__setattr__(self, "forces", forces)
 
-    def accumulate(self, model, x, v, t, out):
+    def accumulate(self, model: Model, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray) -> None:
         out += self.forces
 
-    def potential_energy(self, model, x, t) -> float:
+    def potential_energy(self, model: Model, x: np.ndarray, t: float) -> float:
         return float(-np.sum(self.forces * x))

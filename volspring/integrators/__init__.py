@@ -27,6 +27,7 @@ from volspring.integrators.base import Integrator
 from volspring.integrators.explicit import RK4, ExplicitEuler, Midpoint, SymplecticEuler
 from volspring.integrators.verlet import PositionVerlet, TimeCorrectedVerlet
 from volspring.integrators.implicit import ImplicitEuler  # written alongside, by the implicit-solver work
+from typing import Any
 
 __all__ = ["Integrator", "ExplicitEuler", "SymplecticEuler", "Midpoint", "RK4", "PositionVerlet",
            "TimeCorrectedVerlet", "ImplicitEuler", "INTEGRATORS", "integrator_class", "make_integrator"]
@@ -66,7 +67,7 @@ def integrator_class(name: str) -> type:
     return entry
 
 
-def make_integrator(name: str, **options) -> Integrator:
+def make_integrator(name: str, **options: Any) -> Integrator:
     """An integrator by registered name, built with keyword ``options``.
 
     Parameters

@@ -10,6 +10,10 @@ import numpy as np
 from volspring.errors import SimulationDiverged
 from volspring.material import _real_number
 from volspring.scene import Scene, State
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.integrators.cache import SolverCache
 
 __all__ = ["Integrator"]
 
@@ -41,7 +45,7 @@ class Integrator(ABC):
     def advance(self, scene: Scene, state: State, dt: float) -> State:
         """The scheme itself: the next state before projections. Must not modify ``state``."""
 
-    def step(self, scene: Scene, state: State, dt: float, *, cache=None) -> State:
+    def step(self, scene: Scene, state: State, dt: float, *, cache: SolverCache | None = None) -> State:
         """The state one step ``dt`` [s] after ``state``, projected; ``state`` is not modified.
 
         ``cache`` is the :class:`~volspring.integrators.cache.SolverCache` of an implicit integrator

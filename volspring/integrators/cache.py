@@ -21,6 +21,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from volspring.assembly import BlockPattern
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.scene import Scene
 
 __all__ = ["SolverCache"]
 
@@ -50,7 +54,7 @@ class SolverCache:
     matrix_free: bool = False
     stand_in: object = None
 
-    def pattern_for(self, scene) -> BlockPattern:
+    def pattern_for(self, scene: Scene) -> BlockPattern:
         """The block pattern of ``scene``'s model and free nodes: kept while they are the same, else rebuilt
         (and the hierarchy record dropped)."""
         cached = self.pattern
@@ -59,11 +63,11 @@ class SolverCache:
             self.record = self.stand_in = None
         return self.pattern
 
-    def built(self, pattern, step, t, dt, x, v) -> None:
+    def built(self, pattern: BlockPattern, step: int, t: float, dt: float, x: np.ndarray, v: np.ndarray) -> None:
         """Note that the solver's hierarchy was just built from this state."""
         self.record = (pattern, int(step), float(t), float(dt), x.copy(), v.copy())
 
-    def matches(self, pattern, step, t, dt, x, v) -> bool:
+    def matches(self, pattern: BlockPattern, step: int, t: float, dt: float, x: np.ndarray, v: np.ndarray) -> bool:
         """Whether the hierarchy held was built from exactly this pattern and recorded state."""
         record = self.record
         if record is None or getattr(self.solver, "hierarchy", None) is None or record[0] is not pattern:

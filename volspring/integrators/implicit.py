@@ -62,6 +62,12 @@ from volspring.integrators.base import Integrator
 from volspring.integrators.cache import SolverCache
 from volspring.scene import Scene, State
 from volspring.solvers import LINEAR_SOLVERS, SolveInfo, make_linear_solver
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from scipy import sparse
+    from volspring.solvers.krylov import _LinearSolver
 
 __all__ = ["ImplicitEuler", "ImplicitStepInfo", "SolverCache"]
 
@@ -208,9 +214,10 @@ class ImplicitEuler(Integrator):
     explicit = False
     stability_limit = math.inf
 
-    def __init__(self, *, solver="amg", rtol=1e-3, maxiter=500, newton_iterations=0, rebuild_growth=2.0,
-                 rebuild_every=None, clamp_compression=True, on_failure="raise", smoother="gauss_seidel",
-                 matrix_free=True, timer=time.perf_counter):
+    def __init__(self, *, solver: str = "amg", rtol: float = 1e-3, maxiter: int = 500, newton_iterations: int = 0,
+                 rebuild_growth: float = 2.0, rebuild_every: int | None = None, clamp_compression: bool = True,
+                 on_failure: str = "raise", smoother: str = "gauss_seidel", matrix_free: bool = True,
+                 timer: Callable[[], float] = time.perf_counter):
         if solver not in LINEAR_SOLVERS:
             raise ValueError(f"unknown solver {solver!r}; known: {', '.join(LINEAR_SOLVERS)}")
         if int(newton_iterations) < 0:
@@ -241,7 +248,7 @@ class ImplicitEuler(Integrator):
                            matrix_free=self.matrix_free)
 
     @property
-    def solver(self):
+    def solver(self) -> _LinearSolver:
         """The linear solver of the default cache."""
         return self.cache.solver
 
@@ -306,7 +313,8 @@ class ImplicitEuler(Integrator):
                        None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs, operator,
                        None if operator is None else preconditioner)
 
-    def linear_system(self, scene: Scene, state: State, dt: float):
+    def linear_system(self, scene: Scene, state: State,
+                      dt: float) -> tuple[sparse.spmatrix, sparse.spmatrix | None, BlockPattern]:
         """The linearised system of one step from ``state``, over the free unknowns.
 
         Returns

@@ -48,6 +48,15 @@ import numpy as np
 
 from meshing._io import atomic_path
 from volspring.output.blender_import import blender_frame_rate, import_script_path, write_import_script
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from meshing.anchoring import Anchor
+    from meshing.mesh import TetMesh
+    from volspring.model import Model
+    from numpy.typing import ArrayLike
+    from volspring.scene import State
 
 __all__ = ["BlenderWriter", "BoundarySurface", "read_pc2"]
 
@@ -78,7 +87,7 @@ class BoundarySurface:
     node_count: int
 
     @classmethod
-    def from_mesh(cls, mesh) -> "BoundarySurface":
+    def from_mesh(cls, mesh: TetMesh | Model) -> "BoundarySurface":
         """The boundary surface of a TetMesh (or of a Model's tet mesh)."""
         if hasattr(mesh, "topology"):  # a Model: its mesh nodes come first
             if mesh.topology is None:
@@ -93,7 +102,7 @@ class BoundarySurface:
         return cls(nodes, local[mesh.boundary_faces], node_count)
 
     @classmethod
-    def from_triangles(cls, triangles, node_count) -> "BoundarySurface":
+    def from_triangles(cls, triangles: np.ndarray, node_count: int) -> "BoundarySurface":
         """A surface made of a model's own nodes, ``triangles`` (f, 3) indexing them (a cloth's)."""
         triangles = np.asarray(triangles, dtype=np.int64)
         nodes = np.unique(triangles)
@@ -103,7 +112,7 @@ class BoundarySurface:
     def point_count(self) -> int:
         return len(self.nodes)
 
-    def deform(self, x) -> np.ndarray:
+    def deform(self, x: ArrayLike) -> np.ndarray:
         """The surface vertices at node positions ``x``.
 
         Parameters
@@ -122,7 +131,7 @@ class BoundarySurface:
         return x[self.nodes]
 
 
-def read_pc2(path):
+def read_pc2(path: str | os.PathLike[str]) -> tuple[np.ndarray, float, float]:
     """Read a PC2 point cache.
 
     Parameters
@@ -208,8 +217,10 @@ class BlenderWriter:
     ['frame.pc2', 'frame_0000.obj', 'frame_blender.py']
     """
 
-    def __init__(self, directory, surface, *, name="frame", obj=True, pc2=True, start_frame=0.0,
-                 sample_rate=1.0, first_frame=0, record=None, frame_dt=None):
+    def __init__(self, directory: str | os.PathLike[str], surface: Anchor | BoundarySurface | TetMesh | Model, *,
+                 name: str = "frame", obj: bool = True, pc2: bool = True, start_frame: float = 0.0,
+                 sample_rate: float = 1.0,
+                 first_frame: int = 0, record: Callable[..., Any] | None = None, frame_dt: float | None = None):
         if not hasattr(surface, "deform"):
             surface = BoundarySurface.from_mesh(surface)
         self.surface = surface
@@ -257,7 +268,7 @@ class BlenderWriter:
         return self.directory / f"{self.name}_{frame:04d}.obj"
 
     @property
-    def import_script_path(self):
+    def import_script_path(self) -> Path | None:
         """``NAME_blender.py``, Blender's import script, or None without ``frame_dt``."""
         return None if self.frame_dt is None else import_script_path(self.directory, self.name)
 
@@ -276,11 +287,11 @@ class BlenderWriter:
         if self._record is not None:
             self._record(*paths)
 
-    def __call__(self, frame_index, state):
+    def __call__(self, frame_index: int, state: State) -> None:
         """``simulate`` callback: write ``state`` as the next frame (``frame_index`` is not used)."""
         self.write(state)
 
-    def write(self, state) -> int:
+    def write(self, state: State) -> int:
         """Write the surface at ``state.x`` as the next frame.
 
         Parameters

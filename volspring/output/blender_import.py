@@ -44,6 +44,7 @@ from pathlib import Path
 from string import Template
 
 from meshing._io import atomic_path
+import os
 
 __all__ = ["TEMPLATE", "blender_frame_rate", "import_script", "import_script_path", "write_import_script"]
 
@@ -172,12 +173,12 @@ if __name__ == "__main__":
 ''')
 
 
-def import_script_path(directory, name) -> Path:
+def import_script_path(directory: str | os.PathLike[str], name: str) -> Path:
     """The import script of the Blender output ``name`` in ``directory``: ``NAME_blender.py``."""
     return Path(directory) / f"{name}_blender.py"
 
 
-def blender_frame_rate(frame_dt) -> tuple:
+def blender_frame_rate(frame_dt: float) -> tuple:
     """Blender's frame rate for one frame every ``frame_dt`` seconds.
 
     Blender stores the rate as a whole number ``fps`` over a factor ``fps_base``; the whole number
@@ -214,7 +215,7 @@ def blender_frame_rate(frame_dt) -> tuple:
     return fps, fps_base
 
 
-def import_script(*, name, frame_dt) -> str:
+def import_script(*, name: str, frame_dt: float) -> str:
     """The text of the import script for the Blender output ``name`` (see the module docstring).
 
     Parameters
@@ -242,7 +243,7 @@ def import_script(*, name, frame_dt) -> str:
         frame_dt=repr(float(frame_dt)), fps=fps, fps_base=repr(fps_base), fps_text=f"{fps / fps_base:.6g}")
 
 
-def write_import_script(directory, *, name="frame", frame_dt) -> Path:
+def write_import_script(directory: str | os.PathLike[str], *, name: str = "frame", frame_dt: float) -> Path:
     """Write the import script beside the Blender output ``name`` in ``directory``, atomically.
 
     Also for a folder written without one: the script reads the frame count from the cache when

@@ -53,13 +53,22 @@ import numpy as np
 from meshing._io import atomic_path
 from meshing.geometry import signed_tet_volumes
 from meshing.topology import SPRING_KINDS
+from collections.abc import Sequence
+import os
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from volspring.model import Model
+    from volspring.scene import State
 
 __all__ = ["ParaViewWriter", "read_pvd", "tet_strains", "write_pvd"]
 
 logger = logging.getLogger(__name__)
 
 
-def write_pvd(path, entries) -> Path:
+def write_pvd(path: str | os.PathLike[str], entries: Sequence[tuple[float, str]]) -> Path:
     """Write a PVD collection atomically.
 
     Parameters
@@ -87,7 +96,7 @@ def write_pvd(path, entries) -> Path:
     return path
 
 
-def read_pvd(path) -> list:
+def read_pvd(path: str | os.PathLike[str]) -> list:
     """The datasets of a PVD collection.
 
     Parameters
@@ -228,7 +237,9 @@ class ParaViewWriter:
     (1, 'frame.pvd', [0.0])
     """
 
-    def __init__(self, directory, model, *, name="frame", springs=None, first_frame=0, record=None, triangles=None):
+    def __init__(self, directory: str | os.PathLike[str], model: Model, *, name: str = "frame",
+                 springs: bool | None = None, first_frame: int = 0, record: Callable[..., Any] | None = None,
+                 triangles: ArrayLike | None = None):
         self.directory = Path(directory)
         self.model = model
         self.name = str(name)
@@ -314,11 +325,11 @@ class ParaViewWriter:
             self._record(*paths)
 
     # ------------------------------------------------------------------ writing
-    def __call__(self, frame_index, state):
+    def __call__(self, frame_index: int, state: State) -> None:
         """``simulate`` callback: write ``state`` as the next frame (``frame_index`` is not used)."""
         self.write(state)
 
-    def write(self, state) -> int:
+    def write(self, state: State) -> int:
         """Write ``state`` as the next frame, then rewrite the PVD files.
 
         Parameters
@@ -398,7 +409,7 @@ def _rest_inverses(mesh) -> np.ndarray:
     return np.linalg.inv(np.transpose(corners[:, 1:] - corners[:, :1], (0, 2, 1)))
 
 
-def tet_strains(tets, rest_inverses, x) -> np.ndarray:
+def tet_strains(tets: np.ndarray, rest_inverses: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(T,) float -- |U - I| of every tet at positions x: the norm of its Biot strain, free of rotation [-].
 
     F = R U is each tet's deformation gradient (current edge matrix times ``rest_inverses``); an

@@ -21,7 +21,7 @@ __all__ = ["check_output_folder"]
 logger = logging.getLogger("volspring.output.run_folder")
 
 
-def check_output_folder(path, *, label: str = "output folder") -> Path:
+def check_output_folder(path: str | os.PathLike[str], *, label: str = "output folder") -> Path:
     """Check that ``path`` is, or can be created as, a writable folder; nothing is created.
 
     Meant to run before any work, so that a bad output location is reported in seconds rather

@@ -64,6 +64,8 @@ from volspring._signals import Interrupted
 from volspring.output.run_files import _inside, _remove_listed, check_output_folder
 from volspring.output.run_manifest import (MANIFEST_FORMAT, MANIFEST_NAME, MANIFEST_VERSION, STATUSES, _describe,
                                            _now, _status, read_manifest)
+from typing import Any, Literal
+from collections.abc import Sequence
 
 __all__ = ["MANIFEST_NAME", "RunFolder", "RunFolderRefused", "check_output_folder", "read_manifest"]
 
@@ -92,7 +94,8 @@ class RunFolderRefused(ValueError):
         The manifest found there, if it could be read.
     """
 
-    def __init__(self, message: str, *, folder, reason: str, previous=None):
+    def __init__(self, message: str, *, folder: str | os.PathLike[str], reason: str,
+                 previous: dict[str, Any] | None = None):
         super().__init__(message)
         self.folder, self.reason, self.previous = Path(folder), reason, previous
 
@@ -120,7 +123,8 @@ class RunFolder:
         Whether this run continues the previous one (``resume=True`` on a folder with a manifest).
     """
 
-    def __init__(self, path, manifest: dict, *, previous=None, removed=(), resumed=False):
+    def __init__(self, path: str | os.PathLike[str], manifest: dict, *, previous: dict[str, Any] | None = None,
+                 removed: Sequence[str] = (), resumed: bool = False):
         self.path = Path(path)
         self.manifest_path = self.path / MANIFEST_NAME
         self._manifest = manifest
@@ -129,8 +133,9 @@ class RunFolder:
 
     # ------------------------------------------------------------------ opening
     @classmethod
-    def open(cls, path, *, command, overwrite: bool = False, resume: bool = False,
-             replace_same_command: bool = False, flags=None) -> "RunFolder":
+    def open(cls, path: str | os.PathLike[str], *, command: Sequence[str], overwrite: bool = False,
+             resume: bool = False, replace_same_command: bool = False,
+             flags: dict[str, Any] | None = None) -> "RunFolder":
         """Open ``path`` for a run of ``command``, following the rules of the module docstring.
 
         Parameters
@@ -257,7 +262,7 @@ class RunFolder:
     def command(self) -> list:
         return list(self._manifest["command"])
 
-    def record(self, *paths) -> None:
+    def record(self, *paths: str | os.PathLike[str]) -> None:
         """List files in the manifest before they are written.
 
         Call it before a file appears under its final name (before the rename of
@@ -306,7 +311,7 @@ class RunFolder:
             raise ValueError(f"{path} is the run manifest; it is not an output to record")
         return relative.as_posix()
 
-    def note(self, key: str, value) -> None:
+    def note(self, key: str, value: Any) -> None:
         """Record what the run is beside its files, e.g. ``note("model", {"rung": "smoothed", ...})``.
 
         Parameters
@@ -355,7 +360,7 @@ class RunFolder:
     def __enter__(self) -> "RunFolder":
         return self
 
-    def __exit__(self, kind, error, traceback) -> bool:
+    def __exit__(self, kind, error, traceback) -> Literal[False]:
         """Finish as "finished", "interrupted" (Ctrl-C, a termination signal) or "failed" (another exception)."""
         if self.status != "running":
             return False

@@ -47,6 +47,7 @@ import shlex
 import socket
 from importlib import metadata
 from pathlib import Path
+from collections.abc import Sequence
 
 __all__ = ["MANIFEST_NAME", "RECORDED_PACKAGES", "package_versions", "read_manifest"]
 
@@ -60,7 +61,7 @@ RECORDED_PACKAGES = ("volspring", "numpy", "scipy", "pyamg", "meshio", "gmsh", "
                      "h5py", "tqdm")
 
 
-def package_versions(packages=RECORDED_PACKAGES) -> dict:
+def package_versions(packages: Sequence[str] = RECORDED_PACKAGES) -> dict:
     """The Python version, the platform and the installed version of each package.
 
     Parameters
@@ -80,7 +81,7 @@ def package_versions(packages=RECORDED_PACKAGES) -> dict:
     >>> sorted(versions), versions["no-such-package"]
     (['no-such-package', 'numpy', 'platform', 'python'], None)
     """
-    versions = {"python": platform.python_version(), "platform": platform.platform()}
+    versions: dict[str, str | None] = {"python": platform.python_version(), "platform": platform.platform()}
     for name in packages:
         try:
             versions[name] = metadata.version(name)
@@ -89,7 +90,7 @@ def package_versions(packages=RECORDED_PACKAGES) -> dict:
     return versions
 
 
-def read_manifest(path) -> dict:
+def read_manifest(path: str | os.PathLike[str]) -> dict:
     """Read and check a run manifest.
 
     Parameters

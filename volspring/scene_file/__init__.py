@@ -102,6 +102,9 @@ from pathlib import Path
 
 from volspring.scene_file._assemble import AssembledScene, assemble_scene
 from volspring.scene_file._keys import SCENE, SceneFileError, joined, resolved, unknown_key
+from typing import Any
+from collections.abc import Sequence
+import os
 
 __all__ = ["AssembledScene", "SCENE", "SceneFileError", "assemble_scene", "load_toml", "parse_assignment",
            "read_scene", "resolve_scene", "set_value", "split_key_path"]
@@ -109,7 +112,7 @@ __all__ = ["AssembledScene", "SCENE", "SceneFileError", "assemble_scene", "load_
 _SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*)((?:\[\d+\])*)")
 
 
-def load_toml(path) -> dict:
+def load_toml(path: str | os.PathLike[str]) -> dict:
     """The scene file at ``path`` as a dict, unchecked. Raises SceneFileError naming the file for bad TOML."""
     path = Path(path)
     if not path.is_file():
@@ -128,7 +131,7 @@ def resolve_scene(scene: dict) -> dict:
     return resolved(scene)
 
 
-def read_scene(path, *, overrides=()) -> dict:
+def read_scene(path: str | os.PathLike[str], *, overrides: Sequence[str] = ()) -> dict:
     """Load, override and resolve a scene file.
 
     Parameters
@@ -185,7 +188,7 @@ def parse_assignment(text: str) -> tuple:
     return key.strip(), parsed
 
 
-def set_value(scene: dict, key_path: str, value) -> None:
+def set_value(scene: dict, key_path: str, value: Any) -> None:
     """Set the value at ``key_path`` in ``scene`` (in place), making the tables on the way.
 
     Raises

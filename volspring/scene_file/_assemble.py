@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from volspring.scene_file._keys import SceneFileError, joined
+import os
 
 __all__ = ["AssembledScene", "assemble_scene", "at"]
 
@@ -77,7 +78,7 @@ def at(path: str):
         raise SceneFileError(f"{path}: {text}") from error
 
 
-def assemble_scene(scene: dict, *, base=".") -> AssembledScene:
+def assemble_scene(scene: dict, *, base: str | os.PathLike[str] = ".") -> AssembledScene:
     """Build the model, scene, initial state and integrator of a resolved scene.
 
     Parameters

@@ -43,16 +43,23 @@ Examples
 (array([2.5, 4. , 4.5, 4. , 2.5]), 'direct', True)
 """
 
+from __future__ import annotations
+
 from volspring.solvers.amg import AMGConjugateGradient, BLOCK_JACOBI_OMEGA, PROLONGATION_OMEGA, PYAMG_CYCLE_VERSIONS
 from volspring.solvers.krylov import (LINEAR_SOLVERS, DirectSolver, JacobiConjugateGradient, SolveInfo,
                                       conjugate_gradient)
+from typing import Any
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.solvers.krylov import _LinearSolver
 
 __all__ = ["SolveInfo", "conjugate_gradient", "DirectSolver", "JacobiConjugateGradient",
            "AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "LINEAR_SOLVERS", "PROLONGATION_OMEGA",
            "PYAMG_CYCLE_VERSIONS", "make_linear_solver"]
 
 
-def make_linear_solver(method, **options):
+def make_linear_solver(method: str, **options: Any) -> _LinearSolver:
     """A solver by name: ``"amg"``, ``"jacobi"`` or ``"direct"`` (options passed on)."""
     kinds = {"amg": AMGConjugateGradient, "jacobi": JacobiConjugateGradient, "direct": DirectSolver}
     if method not in kinds:

@@ -11,6 +11,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring.solvers.krylov import SolveInfo, _LinearSolver, _operator, conjugate_gradient
+from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from scipy import sparse
 
 __all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "PROLONGATION_OMEGA", "PYAMG_CYCLE_VERSIONS"]
 
@@ -153,8 +160,9 @@ class AMGConjugateGradient(_LinearSolver):
 
     method = "amg"
 
-    def __init__(self, *, rtol=1e-3, maxiter=500, on_failure="raise", smoother="gauss_seidel",
-                 max_coarse=300, strength_theta=0.05, timer=time.perf_counter):
+    def __init__(self, *, rtol: float = 1e-3, maxiter: int = 500, on_failure: str = "raise",
+                 smoother: str = "gauss_seidel", max_coarse: int = 300, strength_theta: float = 0.05,
+                 timer: Callable[[], float] = time.perf_counter):
         super().__init__(rtol=rtol, maxiter=maxiter, on_failure=on_failure, timer=timer)
         if smoother not in ("gauss_seidel", "jacobi"):
             raise ValueError(f"smoother = {smoother!r}, expected 'gauss_seidel' or 'jacobi'")
@@ -166,7 +174,7 @@ class AMGConjugateGradient(_LinearSolver):
         self._cycle = None       # r -> z, one V-cycle of it (not pickled)
 
     @property
-    def hierarchy(self):
+    def hierarchy(self) -> Any:
         """The pyamg ``MultilevelSolver``; None before the first build, and after unpickling until
         the next :meth:`solve` or :meth:`precondition` rebuilds it."""
         return self._hierarchy
@@ -176,7 +184,8 @@ class AMGConjugateGradient(_LinearSolver):
         state["_hierarchy"] = state["_cycle"] = None  # closures inside: rebuilt from _source on use
         return state
 
-    def build(self, matrix, near_null_space, *, prolongation=None) -> float:
+    def build(self, matrix: sparse.spmatrix, near_null_space: ArrayLike, *,
+              prolongation: sparse.spmatrix | None = None) -> float:
         """Build the hierarchy for ``matrix``; returns the seconds it took (by ``timer``).
 
         Parameters
@@ -255,7 +264,7 @@ class AMGConjugateGradient(_LinearSolver):
                     for level in hierarchy.levels[:-1]]
         change_smoothers(hierarchy, weighted, weighted)
 
-    def refresh(self, matrix) -> None:
+    def refresh(self, matrix: sparse.spmatrix) -> None:
         """Put ``matrix`` under the hierarchy's finest level (its smoother and residuals), keeping the coarse levels.
 
         For a system whose fine matrix changed in a few rows since the build, as contact changes from
@@ -281,7 +290,7 @@ class AMGConjugateGradient(_LinearSolver):
         hierarchy.levels[0].A = sp.bsr_matrix(matrix, blocksize=(3, 3))
         self._set_smoothers(hierarchy)
 
-    def precondition(self, r) -> np.ndarray:
+    def precondition(self, r: np.ndarray) -> np.ndarray:
         """One cycle from a zero guess: z ~ A^-1 r (an SPD operator for CG).
 
         Parameters
@@ -309,7 +318,9 @@ class AMGConjugateGradient(_LinearSolver):
         gauss_seidel(matrix, z, r, iterations=1, sweep="backward")
         return z
 
-    def solve(self, matrix, rhs, *, x0=None, extra=None, near_null_space=None, prolongation=None):
+    def solve(self, matrix: sparse.spmatrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
+              extra: sparse.spmatrix | None = None, near_null_space: np.ndarray | None = None,
+              prolongation: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolveInfo]:
         """Solve ``(matrix + extra) x = rhs``; returns ``(x, SolveInfo)``.
 
         Parameters

@@ -11,6 +11,13 @@ import numpy as np
 import scipy.sparse.linalg as sla
 
 from volspring.errors import SolverNotConverged
+from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
+    from scipy import sparse
 
 __all__ = ["SolveInfo", "conjugate_gradient", "DirectSolver", "JacobiConjugateGradient", "LINEAR_SOLVERS"]
 
@@ -56,7 +63,9 @@ class SolveInfo:
     rebuilt: bool = False
 
 
-def conjugate_gradient(apply, b, *, x0=None, preconditioner=None, rtol=1e-3, maxiter=200):
+def conjugate_gradient(apply: Callable[..., Any], b: ArrayLike, *, x0: ArrayLike | None = None,
+                       preconditioner: Callable[..., Any] | None = None, rtol: float = 1e-3,
+                       maxiter: int = 200) -> tuple[np.ndarray, int, float, float]:
     """Preconditioned conjugate gradients for an SPD operator.
 
     Parameters
@@ -143,7 +152,8 @@ class _LinearSolver:
 
     method = ""
 
-    def __init__(self, *, rtol=1e-3, maxiter=500, on_failure="raise", timer=time.perf_counter):
+    def __init__(self, *, rtol: float = 1e-3, maxiter: int = 500, on_failure: str = "raise",
+                 timer: Callable[[], float] = time.perf_counter):
         if not (np.isfinite(rtol) and 0 < rtol < 1):
             raise ValueError(f"rtol = {rtol!r} is not in (0, 1)")
         if int(maxiter) < 1:
@@ -182,10 +192,12 @@ class DirectSolver(_LinearSolver):
 
     method = "direct"
 
-    def __init__(self, *, rtol=1e-8, on_failure="raise", timer=time.perf_counter):
+    def __init__(self, *, rtol: float = 1e-8, on_failure: str = "raise",
+                 timer: Callable[[], float] = time.perf_counter):
         super().__init__(rtol=rtol, maxiter=1, on_failure=on_failure, timer=timer)
 
-    def solve(self, matrix, rhs, *, x0=None, extra=None):
+    def solve(self, matrix: sparse.spmatrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
+              extra: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolveInfo]:
         start = self.timer()
         full = matrix.tocsc() if extra is None else (matrix + extra).tocsc()
         try:
@@ -206,7 +218,8 @@ class JacobiConjugateGradient(_LinearSolver):
 
     method = "jacobi"
 
-    def solve(self, matrix, rhs, *, x0=None, extra=None):
+    def solve(self, matrix: sparse.spmatrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
+              extra: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolveInfo]:
         start = self.timer()
         diagonal = matrix.diagonal() if extra is None else matrix.diagonal() + extra.diagonal()
         if not (diagonal > 0).all():
