@@ -124,22 +124,24 @@ def _positive_or_inf(value):  # the runaway check: inf turns it off, as --runawa
     return None if value > 0 else "is not > 0 (inf turns the energy check off)"
 
 
+def _exactly_one(table, names, expected):
+    """None when ``table`` gives exactly one of ``names``, else the end of a message saying what it gives."""
+    given = [name for name in names if name in table]
+    if len(given) == 1:
+        return None
+    return f"gives {' and '.join(given) or 'neither ' + ' nor '.join(names)}; expected {expected}"
+
+
 def _one_source(body):
-    given = [name for name in ("mesh", "shape") if name in body]
-    if len(given) != 1:
-        return f"gives {' and '.join(given) or 'neither mesh nor shape'}; expected one of mesh (a file) or shape"
-    if "size" in body and "mesh" in body:
+    refused = _exactly_one(body, ("mesh", "shape"), "one of mesh (a file) or shape")
+    if refused is None and "size" in body and "mesh" in body:
         return "gives size with mesh; size is the tet edge length of a shape (a mesh file is already meshed)"
-    return None
+    return refused
 
 
 def _one_surface(body):
     """A lattice body fills one closed surface: a mesh file or a built-in shape."""
-    given = [name for name in ("mesh", "shape") if name in body]
-    if len(given) != 1:
-        return (f"gives {' and '.join(given) or 'neither mesh nor shape'}; expected one of mesh (a closed surface "
-                "file) or shape")
-    return None
+    return _exactly_one(body, ("mesh", "shape"), "one of mesh (a closed surface file) or shape")
 
 
 def _grid_or_mesh(cloth):
@@ -155,11 +157,7 @@ def _grid_or_mesh(cloth):
 
 
 def _one_selection(support):
-    given = [name for name in ("region", "nodes") if name in support]
-    if len(given) != 1:
-        return (f"gives {' and '.join(given) or 'neither region nor nodes'}; expected one of region (by position) "
-                "or nodes (by number)")
-    return None
+    return _exactly_one(support, ("region", "nodes"), "one of region (by position) or nodes (by number)")
 
 
 def _fraction(value):
