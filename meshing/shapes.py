@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from meshing.geometry import triangle_area_normals
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     import trimesh

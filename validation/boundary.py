@@ -33,8 +33,7 @@ import numpy as np
 
 from meshing.geometry import rigid_body_modes
 from volspring.regions import Box  # re-exported: validation.Box and validation.boundary.Box keep working
-from typing import Any
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from meshing.mesh import TetMesh

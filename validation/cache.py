@@ -42,8 +42,7 @@ import volspring
 from meshing._io import atomic_path
 from meshing import tolerances
 from validation import boundary, fem, fem_solvers
-from typing import Any
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from meshing.mesh import TetMesh

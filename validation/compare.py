@@ -27,11 +27,10 @@ from validation import cache
 from validation.cases import Case
 from validation.springs import (VALIDATED_MODELS, deformed_volume_change, rung_model_or_refusal, spring_frequencies,
                                spring_model, spring_static)
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 from collections.abc import Sequence
 import os
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

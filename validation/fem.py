@@ -66,8 +66,7 @@ from validation.boundary import resolve_clamps, resolve_point_loads, resolve_tra
 from validation.fem_assembly import (ELEMENTS, check_element, fixed_vector, load_vector, mass_matrix, mixed_matrices,
                                      p1_prolongation, pressure_basis, skfem_space, fem_stiffness_matrix)
 from validation.fem_solvers import AMG_TOLERANCE, ReferenceInfo, solve_linear, solve_saddle_point
-from typing import Any
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from meshing.mesh import TetMesh

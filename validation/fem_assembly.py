@@ -37,10 +37,9 @@ from skfem.helpers import ddot, div, dot, sym_grad
 from skfem.models.elasticity import lame_parameters, linear_elasticity
 
 from validation.boundary import FixedDofs, evaluate_vectors
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from meshing.mesh import TetMesh

@@ -51,11 +51,10 @@ from validation.cases import CUBE, uniaxial_compression
 from validation.compare import LADDER_RULE, compare_modes, compare_static
 from validation.springs import VALIDATED_MODELS, case_scene, effective_constants, rung_model_or_refusal
 from volspring.material import Material
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 from collections.abc import Sequence
 import os
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from validation._case import Case

@@ -61,9 +61,8 @@ from validation.fem import elastic_constants
 from validation.fem_assembly import check_element, fixed_vector, load_vector, skfem_space
 from volspring.errors import SolverNotConverged
 from volspring.solvers import DirectSolver
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from meshing.mesh import TetMesh

@@ -38,11 +38,10 @@ from validation.cases import cantilever_gravity
 from validation.compare import RULES, tip_deflection
 from validation.springs import effective_constants, held_nodes, spring_frequencies, spring_model, spring_static
 from volspring.material import Material
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 from collections.abc import Sequence
 import os
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

@@ -23,12 +23,11 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from volspring.collision.obstacles import HalfSpace  # re-exported: volspring.constraints.HalfSpace keeps working
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

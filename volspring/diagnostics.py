@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 from meshing.geometry import signed_tet_volumes
 from volspring.model import Model
 from volspring.forces import Gravity
 from volspring.scene import Scene, State
 from volspring.springs import spring_energy as _spring_energy
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

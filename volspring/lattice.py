@@ -63,8 +63,7 @@ from meshing.topology import SPRING_KINDS
 from volspring.elements import AngleSprings, Springs
 from volspring.material import Material, _real_number
 from volspring.model import Model
-from typing import Any
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from meshing.mesh import TetMesh

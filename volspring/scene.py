@@ -29,8 +29,7 @@ from volspring.forces._checks import MassProportional
 from volspring.material import _real_array, _real_number, _shown
 from volspring.supports import Pins, Prescribed, Sliding
 from volspring.model import Model
-from typing import Any
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

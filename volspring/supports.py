@@ -21,12 +21,11 @@ eliminated from the linear systems; partly held nodes keep their free components
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
 from volspring.material import _shown
-from typing import Any
 
 __all__ = ["Pins", "Prescribed", "Sliding", "components_mask"]
 

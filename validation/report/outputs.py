@@ -22,11 +22,10 @@ from validation.report import runner
 from meshing._io import atomic_path
 from meshing.mesh import TetMesh
 from validation.springs import VALIDATED_MODELS
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 from collections.abc import Sequence
 import os
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from validation._case import Case

@@ -46,11 +46,10 @@ from validation.cases import build_case, uniaxial_compression
 from validation.compare import RULES, compare_modes, compare_static
 from validation.heldout import HELDOUT_CASE_NAMES
 from validation.springs import VALIDATED_MODELS
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 from collections.abc import Sequence
 import os
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from validation._case import Case

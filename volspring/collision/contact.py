@@ -48,9 +48,8 @@ from volspring.collision.spatial_hash import detect_collisions
 from volspring.collision.tet_tet import EdgeCrossingContacts, crossing_tet_pairs, edge_crossing_contacts
 from volspring.model import Model
 from meshing.topology import SPRING_KINDS
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike

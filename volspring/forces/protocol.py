@@ -29,12 +29,10 @@ from __future__ import annotations
 import functools
 import inspect
 import warnings
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from volspring._deprecation import REMOVED_IN
-from typing import Any
 import numpy as np
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from scipy import sparse

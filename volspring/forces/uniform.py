@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import scipy.sparse as sp
@@ -19,7 +19,6 @@ import scipy.sparse as sp
 from volspring.forces._checks import MassProportional, finite, masses_or_none, vector
 from volspring.forces.protocol import legacy_positional
 from volspring.material import _real_array, _real_number, _shown
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from scipy import sparse

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
 from volspring.material import _shown
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from volspring.model import Model

@@ -48,8 +48,7 @@ from __future__ import annotations
 from volspring.solvers.amg import AMGConjugateGradient, BLOCK_JACOBI_OMEGA, PROLONGATION_OMEGA, PYAMG_CYCLE_VERSIONS
 from volspring.solvers.krylov import (LINEAR_SOLVERS, DirectSolver, JacobiConjugateGradient, SolveInfo,
                                       conjugate_gradient)
-from typing import Any
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from volspring.solvers.krylov import _LinearSolver

@@ -11,9 +11,8 @@ import numpy as np
 import scipy.sparse.linalg as sla
 
 from volspring.errors import SolverNotConverged
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
-from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
