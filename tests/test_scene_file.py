@@ -114,9 +114,10 @@ def test_a_steady_wind_accelerates_a_free_body_as_implicit_euler_predicts(tmp_pa
 
 # ---------------------------------------------------------------------- structures: strings, hair, cloth, lattices
 def test_every_example_scene_is_run_here():
-    source = Path(__file__).read_text()
+    # Here, or by the test file of its feature (beam_vs_fem: tests/test_scene_compare.py).
+    source = "".join(path.read_text() for path in Path(__file__).parent.glob("test_scene_*.py"))
     for scene in sorted(SCENES.glob("*.toml")):
-        assert scene.stem in source, f"examples/scenes/{scene.name} is not run by tests/test_scene_file.py"
+        assert scene.stem in source, f"examples/scenes/{scene.name} is not run by tests/test_scene_*.py"
 
 
 def test_the_plucked_string_swings_to_its_other_side_in_half_a_period(tmp_path, capsys):
@@ -375,6 +376,7 @@ def test_bad_values_are_one_line_naming_the_key_path(capsys, override, message):
     ('duration = 1\n', "bodies is missing; expected an array of tables"),
     ('[[bodies]]\nshape = "box:1,0.1,0.1"\nmesh = "b.vtu"\n', "bodies[0] gives mesh and shape; expected one"),
     ('[[bodies]\n', "is not valid TOML"),
+    ('[[bodies]]\nshape = "box:1,0.1,0.1"\nzzz = 1\n', "bodies[0].zzz is not a known key; expected one of: name, "),
     ('[[bodies]]\nshape = "box:1,0.1,0.1"\n[[fields]]\ntype = "wind"\ndirection = [1, 0, 0]\nrate = -1\n',
      "fields[0].rate = -1.0 is not finite and >= 0"),
 ])

@@ -39,6 +39,7 @@ class BuiltRun(NamedTuple):
     state: object  # the initial state
     triangles: object = None  # a scene's cloth triangles (model node numbers), for the ParaView surface series
     render_surface: object = None  # a scene's surface for Blender when it has structures; None: the model's boundary
+    comparison: object = None  # a scene's [compare] body as a StaticProblem (volspring.comparisons), or None
 
 
 def build_run(args, note=None) -> BuiltRun:
@@ -72,7 +73,7 @@ def build_run(args, note=None) -> BuiltRun:
         origin = built.origins[0]
         if "kind" in records[0]:  # a string, hair, cloth or lattice: the body line says what it is
             return BuiltRun(origin, built.model, record, None, built.scene, built.integrator, built.state,
-                            built.triangles, built.render_surface)
+                            built.triangles, built.render_surface, built.comparison)
     else:
         record = {"rung": built.model.rung, "bodies": records, "element_sets": element_sets}
         origin = f"{args.input}, {len(records)} bodies (" + "; ".join(
@@ -80,7 +81,7 @@ def build_run(args, note=None) -> BuiltRun:
             enumerate(zip(args.scene["bodies"], built.origins))) + ")"
     note("model", record)
     return BuiltRun(origin, built.model, record, record if len(records) == 1 else None, built.scene,
-                    built.integrator, built.state, built.triangles, built.render_surface)
+                    built.integrator, built.state, built.triangles, built.render_surface, built.comparison)
 
 
 def _body_record(spec) -> dict:

@@ -191,6 +191,13 @@ def _run_in(args, where: RunProgress, folder) -> int:
     lines = summary_lines(args, built.origin, model, scene, integrator, result, first_frame,
                           time.perf_counter() - started, built.summary_record,
                           surface_series=built.triangles is not None)
+    if built.comparison is not None:  # the scene's [compare]: the end state against the reference
+        from volspring.scene_file import compare_final_state, comparison_line
+
+        with timings.phase("compare"):
+            numbers = compare_final_state(args.scene, built.comparison, result.state.x)
+        note("comparison", {"case": args.scene["compare"]["case"], **numbers})
+        lines.append(comparison_line(args.scene, numbers))
     note("timings", timings.record())
     note("summary", lines)
     if not args.quiet:

@@ -116,7 +116,8 @@ class StepStatistics:
 
 
 class RunTimings:
-    """Wall time of a run's phases [s]: building the model and scene, stepping, writing frames.
+    """Wall time of a run's phases [s]: building the model and scene, stepping, writing frames, and a scene
+    file's comparison (``compare_seconds``, only when there is one).
 
     ``stepping_seconds`` is the time in :func:`~volspring.simulate.simulate` less the frames' writing,
     which the frame callback adds with :meth:`writing`.
@@ -137,7 +138,8 @@ class RunTimings:
 
     @contextmanager
     def phase(self, name):
-        """Add the time of the ``with`` block to phase ``name`` ("build", "stepping" or "writing")."""
+        """Add the time of the ``with`` block to phase ``name`` ("build", "stepping", "writing" or "compare")."""
+        self.phases.setdefault(name, 0.0)
         start = self.clock()
         try:
             yield
@@ -151,10 +153,12 @@ class RunTimings:
         -------
         dict
             ``wall_seconds`` (from this object's creation) and ``build_seconds``, ``stepping_seconds`` (the
-            stepping less the writing inside it), ``writing_seconds``.
+            stepping less the writing inside it), ``writing_seconds``, and ``compare_seconds`` after a comparison.
         """
         stepping = self.phases["stepping"] - self.phases["writing"]
+        extra = {f"{name}_seconds": round(self.phases[name], 6) for name in self.phases
+                 if name not in ("build", "stepping", "writing")}
         return {"wall_seconds": round(self.clock() - self.started, 6),
                 "build_seconds": round(self.phases["build"], 6),
                 "stepping_seconds": round(max(stepping, 0.0), 6),
-                "writing_seconds": round(self.phases["writing"], 6)}
+                "writing_seconds": round(self.phases["writing"], 6), **extra}

@@ -45,6 +45,8 @@ class AssembledScene:
     render_surface : object or None
         For a scene with structures: the surface of every body that has one (tet boundaries, cloths, lattices'
         anchored surfaces) for ``BlenderWriter``; None for tet bodies alone (the model stands for its boundary).
+    comparison : StaticProblem or None
+        The static problem of the body ``[compare]`` names (:mod:`volspring.comparisons`), or None.
     """
 
     bodies: tuple
@@ -55,6 +57,7 @@ class AssembledScene:
     integrator: object
     triangles: object = None
     render_surface: object = None
+    comparison: object = None
 
 
 @contextmanager
@@ -157,16 +160,22 @@ def assemble_scene(scene: dict, *, base: str | os.PathLike[str] = ".") -> Assemb
     with at("supports"):
         built = Scene(model, forces=forces, pins=pins, supports=supports, obstacles=obstacles,
                       constraints=constraints)
+    comparison = None
+    if "compare" in scene:
+        from volspring.scene_file._compare import static_problem
+
+        comparison = static_problem(scene, tuple(bodies), built)
     if structures is None:
         with at("bodies"):
             state = built.initial_state(v=initial_velocities(bodies, model))
-        return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator)
+        return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator,
+                              comparison=comparison)
     x = np.concatenate([model.rest_positions[:structures.offsets[0]]] + [part.x for part in structures.parts])
     v = np.concatenate(velocities + [part.v for part in structures.parts])
     with at("bodies"):
         state = built.initial_state(x=x, v=v)
     return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator, structures.triangles,
-                          structures.render_surface)
+                          structures.render_surface, comparison)
 
 
 class _Structures:

@@ -408,6 +408,16 @@ OUTPUT = Table({
     "checkpoint_every": Key("integer", check=_at_least(1), maps="checkpoint.npz every N frames"),
 }, check=_needs_folder)
 
+COMPARE = Table({
+    "case": Key("string", required=True, maps="a comparison of the entry-point group volspring.comparisons: "
+                                             "static_fem (validation: the FEM static answer of the same body)"),
+    "body": Key("integer", 0, maps="the tet body compared (bodies[body])"),
+    "element": Key("string", choices=("TH", "P2", "P1"), maps="static_fem(element=): the FEM element; default TH "
+                                                             "(P2 for nu <= 0)"),
+    "cache": Key("bool", True, maps="static_fem(cache=): keep the reference in $VOLSPRING_CACHE "
+                                    "(~/.cache/volspring/fem)"),
+})
+
 SCENE = Table({
     "description": Key("string", maps="free text"),
     "duration": Key("number", 1.0, check=_at_least(0), maps="simulate(duration=) [s]; --duration default"),
@@ -422,6 +432,7 @@ SCENE = Table({
                                                          "and lattices against the tet bodies"),
     "integrator": Key("table", {}, table=INTEGRATOR),
     "output": Key("table", {}, table=OUTPUT),
+    "compare": Key("table", table=COMPARE, maps="after the run, the body against a reference (volspring.comparisons)"),
 })
 
 
@@ -453,10 +464,13 @@ def joined(path: str, name) -> str:
 
 
 def unknown_key(path: str, name: str, known) -> SceneFileError:
-    """``bodies[0].materal is not a known key; did you mean material? (known: ...)``."""
+    """``bodies[0].materal is not a known key; did you mean material? (known: ...)``, or without a close key
+    ``... is not a known key; expected one of: ...``."""
     close = difflib.get_close_matches(name, list(known), n=1)
-    hint = f"did you mean {close[0]}? " if close else ""
-    return SceneFileError(f"{joined(path, name)} is not a known key; {hint}(known: {', '.join(known)})")
+    listed = ", ".join(known)
+    if close:
+        return SceneFileError(f"{joined(path, name)} is not a known key; did you mean {close[0]}? (known: {listed})")
+    return SceneFileError(f"{joined(path, name)} is not a known key; expected one of: {listed}")
 
 
 def resolved(scene: dict) -> dict:

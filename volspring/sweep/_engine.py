@@ -172,8 +172,7 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
             used = {name: digests[name] for name in _mesh_names(scene) if name in digests}
             runs.append((run_id(scene, files=used, probes=probes), combination, scene, None))
 
-    keys = list(combinations[0])
-    columns = table_columns(keys, probes)
+    layout = (list(combinations[0]), probes)
     _write_json(out / "sweep.json", {"scene_file": str(scene_path.resolve()), "grid": dict(parameters or {}),
                                      "random": {key: list(bounds) for key, bounds in (random or {}).items()},
                                      "samples": samples, "seed": seed, "probes": probes,
@@ -200,7 +199,7 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
         progress["done"] += 1
         progress["executed"] += 1
         if time.monotonic() - progress["written"] > TABLE_INTERVAL:
-            _write_table(table, runs, on_disk, columns)
+            _write_table(table, runs, on_disk, layout)
             progress["written"] = time.monotonic()
         if callback is not None:
             callback(record, progress["done"], total)
@@ -218,7 +217,7 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
         else:
             missing = _run_on_cluster(client, runnable, base, probes, files, finish)
     finally:
-        _write_table(table, runs, on_disk, columns)
+        _write_table(table, runs, on_disk, layout)
     if missing:
         logger.warning("%d of %d runs have no record (lost to the cluster); run the sweep again to compute them",
                        len(missing), total)
@@ -316,10 +315,11 @@ def _worker() -> dict:
             "blas_threads": {name: os.environ.get(name) for name in BLAS_ENVIRONMENT}}
 
 
-def _write_table(table, runs, on_disk, columns) -> None:
+def _write_table(table, runs, on_disk, layout) -> None:
+    """Write the records of ``runs`` on disk as the table; ``layout`` is ``(swept key paths, probes)``."""
     rows = [{**on_disk[identifier], "parameters": combination} for identifier, combination, *_ in runs
             if identifier in on_disk]
-    write_table(table, rows, columns)
+    write_table(table, rows, table_columns(*layout, rows))
 
 
 def _write_json(path, data) -> None:

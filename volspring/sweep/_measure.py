@@ -20,8 +20,11 @@ The measured quantities, all of the final state (the set is small on purpose; :d
 ``potential_energy``        elastic energy plus the conservative fields' potential [J]
 ==========================  ====================================================================================
 
-and for each probe ``NAME`` (a point [m]: the node nearest it at rest), ``NAME_node`` and its displacement
-``NAME_ux``, ``NAME_uy``, ``NAME_uz`` [m].
+for each probe ``NAME`` (a point [m]: the node nearest it at rest), ``NAME_node`` and its displacement
+``NAME_ux``, ``NAME_uy``, ``NAME_uz`` [m]; and for a scene with a ``[compare]`` table, the comparison's numbers
+prefixed ``compare_`` (``static_fem``: ``compare_peak_ratio``, ``compare_rms_error``, ...,
+:mod:`validation.scene_comparison`): the error against the FEM reference of each run, the accuracy axis of a
+speed/accuracy trade. Their time is ``seconds["compare"]``, not part of ``stepping``.
 """
 
 from __future__ import annotations
@@ -94,6 +97,13 @@ def run_scene(scene: dict, *, base=".", probes=None) -> dict:
                                   frame_dt=scene["output"]["frame_dt"], guard=integrator["guard"], **checks)
             record["seconds"]["stepping"] = time.perf_counter() - stepping
             record["measured"] = _measured(built.scene, result.state, probes or {})
+            if built.comparison is not None:  # the scene's [compare]: its numbers are measured quantities too
+                from volspring.scene_file import compare_final_state
+
+                comparing = time.perf_counter()
+                numbers = compare_final_state(scene, built.comparison, result.state.x)
+                record["measured"].update({f"compare_{name}": value for name, value in numbers.items()})
+                record["seconds"]["compare"] = time.perf_counter() - comparing
         except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
             record.update(status="diverged", error=_one_line(error), error_type=type(error).__name__)
         except Exception as error:  # a value the scene or the API refuses, a solver that failed: the run's row

@@ -6,7 +6,7 @@ again. ``results.csv`` is made from them (:func:`write_table`), rewritten atomic
 
 Columns (:func:`table_columns`): ``run``, the swept key paths, ``status``, ``error``, the solver statistics
 (:data:`~volspring.sweep._measure.SOLVER`), the measured quantities (:data:`~volspring.sweep._measure.MEASURED`,
-then the probes'), ``warnings``, and last the times (:data:`TIMING_COLUMNS`), the only values that change from one
+then the probes', then a comparison's), ``warnings``, and last the times (:data:`TIMING_COLUMNS`), the only values that change from one
 execution of the same run to the next. Floats are written as Python's ``repr`` (the shortest text that reads back
 to the same float), so a table read back holds the very numbers computed; an empty cell is a value that does not
 apply (no CG iterations for an explicit integrator, no measurement for a failed run).
@@ -27,8 +27,8 @@ __all__ = ["RUNS_FOLDER", "TABLE_NAME", "TIMING_COLUMNS", "read_record", "record
 TABLE_NAME = "results.csv"
 RUNS_FOLDER = "runs"
 RECORD_NAME = "run.json"
-#: Wall time of the run, its building (meshing, model, scene) and its stepping [s].
-TIMING_COLUMNS = ("wall_seconds", "build_seconds", "stepping_seconds")
+#: Wall time of the run, its building (meshing, model, scene), its stepping and its comparison (if any) [s].
+TIMING_COLUMNS = ("wall_seconds", "build_seconds", "stepping_seconds", "compare_seconds")
 
 
 def record_path(out, run_id: str) -> Path:
@@ -53,10 +53,14 @@ def read_record(out, run_id: str):
         return None
 
 
-def table_columns(parameters, probes=()) -> list:
-    """The columns of the table of a sweep over the key paths ``parameters`` with the named ``probes``."""
+def table_columns(parameters, probes=(), records=()) -> list:
+    """The columns of the table of a sweep over the key paths ``parameters`` with the named ``probes``; a
+    measured quantity of ``records`` beyond those (a comparison's ``compare_*``) follows the probes', in the
+    order the records first give them."""
     probed = [f"{name}_{what}" for name in probes for what in ("node", "ux", "uy", "uz")]
-    return ["run", *parameters, "status", "error", *SOLVER, *MEASURED, *probed, "warnings", *TIMING_COLUMNS]
+    known = {*MEASURED, *probed}
+    extra = dict.fromkeys(name for record in records for name in record.get("measured", {}) if name not in known)
+    return ["run", *parameters, "status", "error", *SOLVER, *MEASURED, *probed, *extra, "warnings", *TIMING_COLUMNS]
 
 
 def table_row(record: dict, columns) -> dict:
