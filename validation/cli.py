@@ -16,6 +16,12 @@ spring stiffness rules (``--rule``, comma-separated; default all of :data:`valid
 
     volspring validate --quick --model springs,smoothed --rule van_gelder --out validation-report
 
+A sweep of your own scene (``volspring sweep``, its scene with a ``[compare]`` table) as a trade curve, error
+against FEM over cost, after the ladder (``--sweep`` alone runs no case: the ladder's constants and the
+sweep; :mod:`validation.report.trade`)::
+
+    volspring validate --sweep beam_trade --out trade-report
+
 ``volspring-validate`` is the same command; its options, exit statuses and progress follow the convention of
 all of volspring's commands (:mod:`meshing._command_line`).
 
@@ -88,6 +94,9 @@ def _parser():
     parser.add_argument("--density", type=float, default=1000.0, help="density of --mesh [kg/m^3] (default 1000)")
     parser.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
                         help="gravity on --mesh [m/s^2] (default 0,0,-9.81)")
+    parser.add_argument("--sweep", action="append", default=[], metavar="DIR",
+                        help="a volspring sweep's --out folder: its runs' error against FEM over their cost, in a "
+                             "section after the ladder (repeatable; alone, no case is run)")
     parser.add_argument("--cache", metavar="DIR", help="FEM cache folder (default $VOLSPRING_CACHE or "
                                                        "~/.cache/volspring/fem)")
     add_common_options(parser, progress="progress of the cases and studies on stderr")
@@ -216,11 +225,13 @@ def main(argv: Sequence[str] | None = None) -> int:
             from meshing._io import remove_stale_temporaries
             from validation.cache import default_folder
             from validation.report import validate
+            from validation.report.trade import read_sweep
             from volspring.output import RunFolder
 
             try:
                 _check(args)
                 own = _own_case(args) if args.mesh else None
+                sweeps = [read_sweep(folder) for folder in args.sweep]
                 # The folder is claimed before the work: a refusal comes now, not after minutes of computing.
                 run = RunFolder.open(args.out, command=command, overwrite=args.overwrite, replace_same_command=True,
                                      flags={"overwrite": "--overwrite"})
@@ -235,7 +246,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 try:
                     validate(args.out, cases=args.cases, quick=args.quick, own_case=own, models=args.models,
                              rules=args.rules, folder=args.cache, progress=progress, command=command,
-                             record=run.record)
+                             record=run.record, sweeps=sweeps)
                 except (ValueError, ArithmeticError, RuntimeError, OSError) as error:
                     run.finish("failed")
                     bar.close()

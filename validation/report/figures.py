@@ -70,7 +70,7 @@ def render_figures(results: dict) -> dict:
     Returns
     -------
     dict
-        Figure key (``"profile_<case>"``, ``"refinement"``, ``"volume"``, ``"speed"``, ``"cauchy"``)
+        Figure key (``"profile_<case>"``, ``"refinement"``, ``"volume"``, ``"speed"``, ``"cauchy"``, ``"sweep_<i>"``)
         -> ``data:image/svg+xml;base64,...`` URI; a figure without data is left out.
     """
     import matplotlib
@@ -195,5 +195,11 @@ def render_figures(results: dict) -> dict:
         axes.legend(fontsize=7)
         axes.grid(alpha=0.3)
         figures["cauchy"] = _svg(figure)
+    for index, sweep in enumerate(results.get("sweeps", [])):  # a user's sweeps: validation.report.trade
+        from validation.report.trade import sweep_figure
+
+        uri = sweep_figure(sweep)
+        if uri is not None:
+            figures[f"sweep_{index}"] = uri
     return figures
 

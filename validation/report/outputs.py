@@ -40,13 +40,14 @@ __all__ = ["read_results", "validate", "write_outputs"]
 def validate(out: np.ndarray, *, cases: Sequence[Case] | None = None, quick: bool = False, own_case: Case | None = None,
              rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
              folder: str | os.PathLike[str] | None = None, progress: Any = None, command: str | None = None,
-             record: RunFolder | None = None) -> dict:
+             record: RunFolder | None = None, sweeps: Sequence[dict] = ()) -> dict:
     """:func:`~validation.report.runner.run_validation` then :func:`write_outputs` into ``out``; returns the results.
 
-    ``record`` is passed on to :func:`write_outputs`.
+    ``record`` is passed on to :func:`write_outputs`; ``sweeps`` (:func:`validation.report.trade.read_sweep`) to
+    :func:`~validation.report.runner.run_validation`.
     """
     results, artefacts = runner.run_validation(cases=cases, quick=quick, own_case=own_case, rules=rules,
-                                               models=models, folder=folder, progress=progress)
+                                               models=models, folder=folder, progress=progress, sweeps=sweeps)
     results["command"] = command
     write_outputs(out, results, artefacts, record=record)
     return results

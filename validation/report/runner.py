@@ -31,6 +31,9 @@ results.json layout (units in the key names: ``_m``, ``_m3``, ``_hz``, ``_pa``, 
   ``fem.P2.frequencies_hz``, ``springs.<rule>.frequencies_hz``, ``models.<rung>.frequencies_hz``,
   ``first_frequency_error``; the held-out shapes are in ``ladder`` only;
 - ``studies.refinement``, ``studies.speed``, ``studies.cauchy`` (see :mod:`validation.studies`);
+- ``sweeps``: a user's sweeps (``volspring validate --sweep DIR``), each as
+  :func:`validation.report.trade.read_sweep` reads it (runs with their cost and error against FEM, curves,
+  Pareto front);
 - ``headline.<rule>``: the figures the README quotes;
 - ``files``: the VTU files written and the models in them (added by
   :func:`~validation.report.outputs.write_outputs`).
@@ -127,14 +130,15 @@ def _settings(quick: bool) -> dict:
 
 def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, own_case: Case | None = None,
                    rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
-                   folder: str | os.PathLike[str] | None = None, progress: Callable[..., Any] | None = None) -> tuple:
+                   folder: str | os.PathLike[str] | None = None, progress: Callable[..., Any] | None = None,
+                   sweeps: Sequence[dict] = ()) -> tuple:
     """Run cases, the ladder and studies.
 
     Parameters
     ----------
     cases : sequence of str, optional
         built-in case, held-out case and study names (``BUILT_IN``, ``HELDOUT`` and ``STUDIES``); default all of them
-        (the held-out shapes not with ``quick``), or none when ``own_case`` is given
+        (the held-out shapes not with ``quick``), or none when ``own_case`` or ``sweeps`` is given
     quick : bool
         coarse meshes and short runs (about half a minute in all)
     own_case : Case, optional
@@ -147,6 +151,9 @@ def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, o
         FEM cache folder
     progress : callable, optional
         ``progress(fraction, message)``, fraction in [0, 1]
+    sweeps : sequence of dict
+        a user's sweeps, read by :func:`validation.report.trade.read_sweep`: shown after the ladder; with sweeps
+        and no ``cases`` nor ``own_case``, no case is run
 
     Returns
     -------
@@ -156,7 +163,7 @@ def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, o
     """
     known = BUILT_IN + HELDOUT + STUDIES
     if cases is None or len(cases) == 0:
-        cases = () if own_case is not None else BUILT_IN + (() if quick else HELDOUT) + STUDIES
+        cases = () if own_case is not None or sweeps else BUILT_IN + (() if quick else HELDOUT) + STUDIES
     unknown = [name for name in cases if name not in known]
     if unknown:
         raise ValueError(f"unknown case {unknown[0]!r}; known: {', '.join(known)}")
@@ -174,10 +181,11 @@ def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, o
         report(min(done / total, 1.0), message)
 
     results = {"schema": SCHEMA, "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-               "quick": bool(quick), "versions": versions(), "units": UNITS, "notes": NOTES, "rules": list(rules),
+               "quick": bool(quick), "versions": versions(), "units": UNITS,
+               "notes": NOTES if tasks else [], "rules": list(rules),
                "models": list(models),
                "settings": {key: value for key, value in settings.items() if key != "speed_steps"},
-               "cases": {}, "studies": {}}
+               "cases": {}, "studies": {}, "sweeps": list(sweeps)}
     results["settings"]["speed_steps"] = {key: list(value) for key, value in settings["speed_steps"].items()}
     artefacts = {}
     on_ladder, held_out = [], []  # comparisons made here with the rungs; held-out cases the ladder compares

@@ -302,13 +302,17 @@ def report_sections(results: dict, figures: dict) -> list:
     Returns
     -------
     list of Section
-        The ladder first, then the spring rules, the Cauchy limit, the cases, the refinement and speed
-        studies and the files.
+        The ladder first, then the user's sweeps (``volspring validate --sweep``), the spring rules, the Cauchy
+        limit, the cases, the refinement and speed studies and the files.
     """
     sections = []
     ladder = results.get("ladder")
     if ladder and ladder["rows"]:
         sections.append(ladder_section(ladder, results["cases"]))
+    if results.get("sweeps"):  # the user's own sweeps: their trade curves, right after the ladder
+        from validation.report.trade import sweep_section
+
+        sections += [sweep_section(index, sweep, figures) for index, sweep in enumerate(results["sweeps"])]
     if results.get("headline") and any(results["headline"].values()):
         sections.append(rules_section(results))
     studies = results["studies"]
