@@ -90,7 +90,8 @@ def run_scene(scene: dict, *, base=".", probes=None) -> dict:
             record["seconds"]["build"] = time.perf_counter() - started
             dt, integrator = scene["integrator"]["dt"], scene["integrator"]
             steps = max(int(math.ceil(scene["duration"] / dt - 1e-9)), 0)  # as volspring-sim counts them
-            checks = {} if integrator.get("runaway_factor") is None else {"runaway_factor": integrator["runaway_factor"]}
+            runaway = integrator.get("runaway_factor")
+            checks = {} if runaway is None else {"runaway_factor": runaway}
             stepping = time.perf_counter()
             with statistics.watching(built.integrator):
                 result = simulate(built.scene, built.integrator, duration=steps * dt, dt=dt, state=built.state,

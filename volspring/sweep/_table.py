@@ -6,10 +6,10 @@ again. ``results.csv`` is made from them (:func:`write_table`), rewritten atomic
 
 Columns (:func:`table_columns`): ``run``, the swept key paths, ``status``, ``error``, the solver statistics
 (:data:`~volspring.sweep._measure.SOLVER`), the measured quantities (:data:`~volspring.sweep._measure.MEASURED`,
-then the probes', then a comparison's), ``warnings``, and last the times (:data:`TIMING_COLUMNS`), the only values that change from one
-execution of the same run to the next. Floats are written as Python's ``repr`` (the shortest text that reads back
-to the same float), so a table read back holds the very numbers computed; an empty cell is a value that does not
-apply (no CG iterations for an explicit integrator, no measurement for a failed run).
+then the probes', then a comparison's), ``warnings``, and last the times (:data:`TIMING_COLUMNS`), the only values
+that change from one execution of the same run to the next. Floats are written as Python's ``repr`` (the shortest
+text that reads back to the same float), so a table read back holds the very numbers computed; an empty cell is a
+value that does not apply (no CG iterations for an explicit integrator, no measurement for a failed run).
 """
 
 from __future__ import annotations

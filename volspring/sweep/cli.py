@@ -1,8 +1,9 @@
 """``volspring sweep``: run a scene file once per combination of parameter values, on a local Dask cluster.
 
 ``volspring sweep SCENE.toml [--set KEY.PATH=VALUE] --grid KEY.PATH=V1,V2,... [--random KEY.PATH=LOW:HIGH
---samples N --seed S] --out DIR [--workers N | --scheduler ADDRESS]`` runs every combination (:func:`volspring.sweep.run_sweep`) and
-writes ``DIR/results.csv`` (one row per run) and ``DIR/runs/RUN_ID/run.json``. Runs already in ``DIR`` are not
+--samples N --seed S] --out DIR [--workers N | --scheduler ADDRESS]`` (or ``volspring sweep SWEEP.toml``, a sweep
+file that names its scene and values: :mod:`volspring.sweep._file`) runs every combination
+(:func:`volspring.sweep.run_sweep`) and writes ``DIR/results.csv`` (one row per run) and ``DIR/runs/RUN_ID/run.json``. Runs already in ``DIR`` are not
 computed again, so an interrupted sweep is resumed by running the same command; a failing run is a row with its
 error, and the sweep goes on. By default the runs go to a local cluster of ``--workers`` processes (one BLAS thread
 each); ``--scheduler ADDRESS`` sends them to a running Dask scheduler (``dask scheduler``, ``dask worker``);
@@ -43,7 +44,9 @@ def build_parser() -> Parser:
     parser = Parser(prog=PROG, description="Run a scene file once per combination of parameter values (a grid, or "
                                            "random draws from ranges), on a local Dask cluster or an existing one; "
                                            "one row per run in OUT/results.csv.")
-    parser.add_argument("scene", metavar="SCENE", type=Path, help="a scene file (.toml), as volspring sim takes it")
+    parser.add_argument("scene", metavar="SCENE", type=Path,
+                        help="a scene file (.toml), as volspring sim takes it, or a sweep file (.toml: scene = "
+                             "\"...\" with [grid], [random], [set], [probes]), which the options below add to")
     values = parser.add_argument_group("parameters")
     values.add_argument("--set", action="append", default=[], metavar="KEY.PATH=VALUE",
                         help="a value of the scene for every run, as volspring sim --set (repeatable)")
@@ -54,7 +57,8 @@ def build_parser() -> Parser:
                         help="a range of a key path, --samples draws from it (uniform; whole numbers when both ends "
                              "are); with --grid, every grid point is run with every draw (repeatable)")
     values.add_argument("--samples", type=int, metavar="N", help="draws of the --random ranges")
-    values.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the --random draws (default: 0)")
+    values.add_argument("--seed", type=int, metavar="S", help="seed of the --random draws (default: the sweep "
+                                                              "file's, else 0)")
     values.add_argument("--probe", action="append", default=[], metavar="NAME=X,Y,Z",
                         help="also measure the displacement of the node nearest the point X,Y,Z [m] (columns "
                              "NAME_ux, NAME_uy, NAME_uz; repeatable)")
@@ -126,17 +130,29 @@ def main(argv=None) -> int:
 def _options(args) -> dict:
     """run_sweep's keywords from the command line; ValueError naming the option for a bad value."""
     from volspring.output import check_output_folder
-    from volspring.scene_file import load_toml
-    from volspring.sweep import parse_grid, parse_range
+    from volspring.scene_file import load_toml, parse_assignment
+    from volspring.sweep import is_sweep_file, parse_grid, parse_range, read_sweep_file
 
-    from volspring.scene_file import parse_assignment
-
-    grid = {key: [value] for key, value in map(parse_assignment, args.set)}
+    sweep_file = None
+    if args.scene.suffix.lower() == ".toml" and is_sweep_file(load_toml(args.scene)):
+        sweep_file = read_sweep_file(args.scene)
+        args.scene = sweep_file.scene
+    given = {key: [value] for key, value in map(parse_assignment, args.set)}
     for key, values in map(parse_grid, args.grid):
-        if key in grid:
+        if key in given:
             raise ValueError(f"{key} is given twice (--set, --grid); give it once")
-        grid[key] = values
-    random = dict(parse_range(text) for text in args.random)
+        given[key] = values
+    given_random = dict(parse_range(text) for text in args.random)
+    # A key path on the command line replaces the sweep file's, as a grid or as a range.
+    grid = {key: values for key, values in (sweep_file.grid if sweep_file else {}).items()
+            if key not in given and key not in given_random} | given
+    random = {key: bounds for key, bounds in (sweep_file.random if sweep_file else {}).items()
+              if key not in given} | given_random
+    if sweep_file is not None:
+        args.samples = sweep_file.samples if args.samples is None else args.samples
+        args.seed = sweep_file.seed if args.seed is None else args.seed
+        args.probe = [f"{name}={','.join(map(repr, point))}" for name, point in sweep_file.probes.items()] + args.probe
+    args.seed = 0 if args.seed is None else args.seed
     if random and args.samples is None:
         raise ValueError("--random needs --samples N, the number of draws")
     if args.samples is not None and not random:
@@ -149,7 +165,7 @@ def _options(args) -> dict:
         raise ValueError(f"SCENE {args.scene} is not a scene file (*.toml)")
     load_toml(args.scene)  # a missing file or bad TOML: before any cluster is started
     probes = {}
-    for text in args.probe:
+    for text in args.probe:  # the sweep file's first: a name given again on the command line replaces it
         name, equals, point = text.partition("=")
         try:
             coordinates = [float(value) for value in point.split(",")]
