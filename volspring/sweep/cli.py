@@ -3,9 +3,9 @@
 ``volspring sweep SCENE.toml [--set KEY.PATH=VALUE] --grid KEY.PATH=V1,V2,... [--random KEY.PATH=LOW:HIGH
 --samples N --seed S] --out DIR [--workers N | --scheduler ADDRESS]`` (or ``volspring sweep SWEEP.toml``, a sweep
 file that names its scene and values: :mod:`volspring.sweep._file`) runs every combination
-(:func:`volspring.sweep.run_sweep`) and writes ``DIR/results.csv`` (one row per run) and ``DIR/runs/RUN_ID/run.json``. Runs already in ``DIR`` are not
-computed again, so an interrupted sweep is resumed by running the same command; a failing run is a row with its
-error, and the sweep goes on. By default the runs go to a local cluster of ``--workers`` processes (one BLAS thread
+(:func:`volspring.sweep.run_sweep`) and writes ``DIR/results.csv`` (one row per run) and
+``DIR/runs/RUN_ID/run.json``. Runs already in ``DIR`` are not computed again, so an interrupted sweep is resumed by
+running the same command; a failing run is a row with its error, and the sweep goes on. By default the runs go to a local cluster of ``--workers`` processes (one BLAS thread
 each); ``--scheduler ADDRESS`` sends them to a running Dask scheduler (``dask scheduler``, ``dask worker``);
 ``--workers 0`` runs them one after the other in this process.
 
