@@ -4,14 +4,18 @@ The runs are the README beam (examples/scenes/beam.toml) at a coarse size and a 
 run), and a beam read from a mesh file (the scattered input). Checked: the cluster's table equals the serial one
 row for row, every value but the times identical as text (floats are written as their repr, so equal text is
 the same float); a re-run computes only the runs missing from disk; a failing combination is a row with its error;
-a worker killed mid-sweep costs no run.
+a worker killed mid-sweep costs no run; a sweep stopped by Ctrl-C keeps the runs it finished, and the same
+command then computes only the others.
 """
 
 import csv
 import json
 import os
 import signal
+import subprocess
+import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +25,6 @@ from volspring.sweep import TIMING_COLUMNS, run_sweep, sweep_client, sweep_combi
 from volspring.sweep.cli import main
 
 from conftest import cube_mesh
-
-pytest.importorskip("distributed")
 
 BEAM = Path(__file__).resolve().parents[1] / "examples" / "scenes" / "beam.toml"
 COARSE = {"bodies[0].size": [0.1], "duration": [0.2], "integrator.dt": [0.02]}  # 10 steps on 120 nodes
@@ -153,6 +155,28 @@ def test_a_worker_killed_mid_sweep_costs_no_run(tmp_path):
     assert len(table(tmp_path)) == 10 and all(row["error"] == "" for row in table(tmp_path))
     with pytest.raises(ProcessLookupError):  # it was killed indeed (the nanny starts a new process instead)
         os.kill(victim, 0)
+
+
+def test_ctrl_c_keeps_the_runs_finished_and_the_same_command_computes_the_others(tmp_path):
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "volspring", "sweep", str(BEAM), "--set", "bodies[0].size=0.1", "--set",
+               "integrator.dt=0.02", "--set", "duration=0.6", "--grid", "bodies[0].material.E=" + ",".join(
+                   str(E) for E in np.linspace(1e6, 4e6, 12)), "--workers", "2", "--out", str(out), "--no-progress"]
+    sweep = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120  # the cluster starts in ~5 s and a run takes ~0.3 s [measured]
+    while len(list(out.glob("runs/*/run.json"))) < 2 and time.monotonic() < deadline and sweep.poll() is None:
+        time.sleep(0.05)
+    sweep.send_signal(signal.SIGINT)
+    _, err = sweep.communicate(timeout=120)
+    finished = {path.parent.name for path in out.glob("runs/*/run.json")}
+    assert sweep.returncode == 130, err
+    assert "interrupted by SIGINT (Ctrl-C)" in err and "run the same command to compute the others" in err, err
+    assert 2 <= len(finished) < 12  # stopped mid-sweep, the runs done before the signal on disk
+    assert len(table(out)) == len(finished)  # the table holds them: written on the way out
+    again = subprocess.run(command, capture_output=True, text=True, timeout=300)
+    assert again.returncode == 0, again.stderr
+    assert f"({12 - len(finished)} computed, {len(finished)} already in" in again.stdout
+    assert len(table(out)) == 12 and all(row["status"] == "done" for row in table(out))
 
 
 def test_random_draws_depend_on_the_seed_alone():
