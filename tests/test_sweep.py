@@ -210,6 +210,7 @@ def test_the_command_runs_a_sweep_and_says_so(tmp_path, capsys):
     (["--random", "duration=a:b", "--samples", "2"], "is not KEY.PATH=LOW:HIGH with two numbers"),
     (["--grid", "duration=0.1", "--probe", "tip=1,2"], "--probe 'tip=1,2' is not NAME=X,Y,Z"),
     (["--grid", "duration=0.1", "--workers", "-1"], "--workers -1 is not >= 0"),
+    (["--grid", "duration=0.1", "--frequencies", "-1"], "--frequencies -1 is not >= 0"),
     ([], "nothing to sweep"),
     (["--set", "duration=0.1", "--grid", "duration=0.1,0.2"], "duration is given twice (--set, --grid)"),
 ])

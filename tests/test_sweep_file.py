@@ -87,3 +87,24 @@ def test_a_bad_sweep_file_is_one_line_naming_the_key_path(tmp_path, capsys, text
     err = capsys.readouterr().err
     assert err.startswith("volspring-sweep: error: ") and message in err and err.count("\n") == 1, err
     assert not (tmp_path / "out" / "results.csv").exists()
+
+
+def test_frequencies_are_measured_and_scale_as_the_square_root_of_stiffness(tmp_path):
+    from volspring.modes import solve_modes
+    from volspring.scene_file import assemble_scene, read_scene
+    from volspring.sweep import run_sweep
+
+    grid = {"bodies[0].size": [0.1], "duration": [0.02], "integrator.dt": [0.02], "bodies[0].material.E": [1e6, 4e6]}
+    result = run_sweep(BEAM, grid, tmp_path, frequencies=2)
+    soft, stiff = (record["measured"] for record in result.records)
+    # K is linear in E and M does not depend on it: omega goes as sqrt(E), so 4 E doubles every frequency (to
+    # round-off of the eigensolver, ~1e-12 relative on this 100-dof dense problem).
+    assert stiff["frequency_1_hz"] / soft["frequency_1_hz"] == pytest.approx(2.0, rel=1e-9)
+    assert stiff["frequency_2_hz"] / soft["frequency_2_hz"] == pytest.approx(2.0, rel=1e-9)
+    # The same numbers as solve_modes on the scene at rest, bit for bit.
+    scene = read_scene(BEAM, overrides=["bodies[0].size=0.1", "bodies[0].material.E=1e6"])
+    direct = solve_modes(assemble_scene(scene, base=BEAM.parent).scene, count=2).frequencies
+    assert [soft["frequency_1_hz"], soft["frequency_2_hz"]] == direct.tolist()
+    # The sweep file's key, as the flag.
+    (tmp_path / "f.toml").write_text(f'scene = "{BEAM}"\nfrequencies = 3\n[grid]\nduration = [0.0]\n')
+    assert read_sweep_file(tmp_path / "f.toml").frequencies == 3

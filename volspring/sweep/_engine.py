@@ -80,20 +80,21 @@ class SweepResult:
         return sum(record["status"] != "done" for record in self.records)
 
 
-def run_id(scene: dict, *, files=None, probes=None) -> str:
+def run_id(scene: dict, *, files=None, probes=None, frequencies=0) -> str:
     """The id of a run: 16 hex digits of the SHA-256 of its resolved scene, the contents of the mesh files it
-    reads (``files``: name -> SHA-256), its probes and :data:`RECORD_FORMAT`.
+    reads (``files``: name -> SHA-256), what it measures (probes, frequencies) and :data:`RECORD_FORMAT`.
 
     >>> run_id({"duration": 1.0}) == run_id({"duration": 1.0}) != run_id({"duration": 2.0})
     True
     """
-    text = json.dumps({"format": RECORD_FORMAT, "scene": scene, "files": files or {}, "probes": probes or {}},
+    measured = {"probes": probes or {}} | ({"frequencies": frequencies} if frequencies else {})
+    text = json.dumps({"format": RECORD_FORMAT, "scene": scene, "files": files or {}, **measured},
                       sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
 def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=None, seed=0, client=None,
-              probes=None, callback=None, rerun_failed=False) -> SweepResult:
+              probes=None, frequencies=0, callback=None, rerun_failed=False) -> SweepResult:
     """Run a scene file once per combination of parameter values; write one record per run and a table.
 
     Parameters
@@ -113,6 +114,8 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
         Run on this Dask cluster (:func:`sweep_client`); None runs serially in this process.
     probes : mapping of str to (3,) float, optional
         Named points [m]: the displacement of the node nearest each is measured.
+    frequencies : int
+        Also measure the scene's lowest natural frequencies at rest, this many (:func:`run_scene`).
     callback : callable, optional
         ``callback(record, done, total)`` as each run's record is on disk (``done`` counts the skipped runs too).
     rerun_failed : bool
@@ -148,6 +151,7 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
     raw = load_toml(scene_path)
     combinations = sweep_combinations(parameters, random=random, samples=samples, seed=seed)
     probes = {name: [float(value) for value in point] for name, point in (probes or {}).items()}
+    measures = {"probes": probes, "frequencies": int(frequencies)}
     resolved, refused = [], []
     for combination in combinations:
         scene = copy.deepcopy(raw)
@@ -170,12 +174,12 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
             runs.append((run_id({"refused": combination, "error": str(error)}), combination, None, error))
         else:
             used = {name: digests[name] for name in _mesh_names(scene) if name in digests}
-            runs.append((run_id(scene, files=used, probes=probes), combination, scene, None))
+            runs.append((run_id(scene, files=used, **measures), combination, scene, None))
 
     layout = (list(combinations[0]), probes)
     _write_json(out / "sweep.json", {"scene_file": str(scene_path.resolve()), "grid": dict(parameters or {}),
                                      "random": {key: list(bounds) for key, bounds in (random or {}).items()},
-                                     "samples": samples, "seed": seed, "probes": probes,
+                                     "samples": samples, "seed": seed, **measures,
                                      "runs": [identifier for identifier, *_ in runs]})
     on_disk, pending = {}, {}
     for identifier, combination, scene, error in runs:
@@ -193,7 +197,7 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
         combination, scene, _ = pending[identifier]
         record = {"run": identifier, "parameters": combination, **record, "scene": scene,
                   "files": {name: digests[name] for name in _mesh_names(scene or {}) if name in digests},
-                  "probes": probes}
+                  **measures}
         write_record(out, record)
         on_disk[identifier] = record
         progress["done"] += 1
@@ -213,9 +217,9 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
     try:
         if client is None:
             for identifier, scene in runnable.items():
-                finish(identifier, run_scene(scene, base=base, probes=probes) | {"worker": _worker()})
+                finish(identifier, run_scene(scene, base=base, **measures) | {"worker": _worker()})
         else:
-            missing = _run_on_cluster(client, runnable, base, probes, files, finish)
+            missing = _run_on_cluster(client, runnable, base, measures, files, finish)
     finally:
         _write_table(table, runs, on_disk, layout)
     if missing:
@@ -226,13 +230,13 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
     return SweepResult(table, records, progress["executed"], skipped, tuple(missing))
 
 
-def _run_on_cluster(client, runnable, base, probes, files, finish) -> list:
+def _run_on_cluster(client, runnable, base, measures, files, finish) -> list:
     """Submit one task per run, ``finish`` each record as it arrives; returns the run ids lost to the cluster."""
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
     shared = client.scatter([files], hash=False)[0] if files else None  # once, shared by every task
-    futures = {client.submit(_run_task, scene, base=base, probes=probes, files=shared,
+    futures = {client.submit(_run_task, scene, base=base, measures=measures, files=shared,
                              key=f"volspring-sweep-{identifier}", pure=False): identifier
                for identifier, scene in runnable.items()}
     missing = []
@@ -255,14 +259,14 @@ def _run_on_cluster(client, runnable, base, probes, files, finish) -> list:
     return missing
 
 
-def _run_task(scene, *, base, probes, files):
+def _run_task(scene, *, base, measures, files):
     """A worker's task: the scattered mesh files written to this machine once, then :func:`run_scene`."""
     if files:
         scene = copy.deepcopy(scene)
         for spec in scene["bodies"]:
             if "mesh" in spec and spec["mesh"] in files:
                 spec["mesh"] = str(_materialised(files[spec["mesh"]]))
-    return run_scene(scene, base=base, probes=probes) | {"worker": _worker()}
+    return run_scene(scene, base=base, **measures) | {"worker": _worker()}
 
 
 def _materialised(entry) -> Path:

@@ -24,6 +24,9 @@ given on the command line replaces the file's)::
     [probes]                            # name = a point [m], as --probe
     tip = [0.5, 0, 0]
 
+and ``frequencies = N`` (a top-level key) measures each run's N lowest natural frequencies at rest, as
+``--frequencies``.
+
 (The top-level keys ``samples`` and ``seed`` must come before the first table in TOML.) Errors name the key path
 in the file (``grid."bodies[0].model" = "springs" is not a list of values``) and refuse unknown keys with the closest
 known one suggested, as scene files do (:mod:`volspring.scene_file`).
@@ -69,6 +72,7 @@ KEYS = {
     "samples": "draws of the [random] ranges",
     "seed": "seed of the [random] draws",
     "probes": "a table: name = [x, y, z] [m] (as --probe)",
+    "frequencies": "the scene's lowest natural frequencies measured per run, this many (as --frequencies)",
 }
 
 
@@ -89,6 +93,7 @@ class SweepFile:
     seed : int
     probes : dict of str to [x, y, z]
     description : str
+    frequencies : int
     """
 
     path: Path
@@ -99,6 +104,7 @@ class SweepFile:
     seed: int = 0
     probes: dict = field(default_factory=dict)
     description: str = ""
+    frequencies: int = 0
 
 
 def is_sweep_file(table: dict) -> bool:
@@ -150,11 +156,11 @@ def read_sweep_file(path: str | os.PathLike[str]) -> SweepFile:
                 and all(isinstance(value, numbers.Real) and not isinstance(value, bool) for value in point)):
             raise SceneFileError(f"probes.{name} = {point!r} is not a point; expected a name and [x, y, z] [m]")
         probes[name] = [float(value) for value in point]
-    for name in ("samples", "seed"):
+    for name in ("samples", "seed", "frequencies"):
         if name in table and (isinstance(table[name], bool) or not isinstance(table[name], int)):
             raise SceneFileError(f"{name} = {table[name]!r} is not a whole number")
     return SweepFile(path, (path.parent / table["scene"]), grid, random, table.get("samples"), table.get("seed", 0),
-                     probes, table.get("description", ""))
+                     probes, table.get("description", ""), table.get("frequencies", 0))
 
 
 def _flattened(table: dict, prefix: str = "") -> dict[str, Any]:

@@ -24,7 +24,8 @@ for each probe ``NAME`` (a point [m]: the node nearest it at rest), ``NAME_node`
 ``NAME_ux``, ``NAME_uy``, ``NAME_uz`` [m]; and for a scene with a ``[compare]`` table, the comparison's numbers
 prefixed ``compare_`` (``static_fem``: ``compare_peak_ratio``, ``compare_rms_error``, ...,
 :mod:`validation.scene_comparison`): the error against the FEM reference of each run, the accuracy axis of a
-speed/accuracy trade. Their time is ``seconds["compare"]``, not part of ``stepping``.
+speed/accuracy trade. Their time is ``seconds["compare"]``, not part of ``stepping``. With ``frequencies=N``, the
+scene's N lowest natural frequencies at rest, ``frequency_1_hz`` ... (time ``seconds["modes"]``).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ MEASURED = ("t_end", "displacement_max", "displacement_max_node", "volume_change
 SOLVER = ("steps", "cg_iterations_mean", "cg_iterations_max", "cg_iterations_total")
 
 
-def run_scene(scene: dict, *, base=".", probes=None) -> dict:
+def run_scene(scene: dict, *, base=".", probes=None, frequencies=0) -> dict:
     """Assemble, step and measure one resolved scene; never raises for a failure of the run itself.
 
     Parameters
@@ -57,6 +58,9 @@ def run_scene(scene: dict, *, base=".", probes=None) -> dict:
         The folder the scene's file names are relative to.
     probes : mapping of str to (3,) float, optional
         Name -> a point [m]; the node nearest it at rest is measured.
+    frequencies : int
+        Also measure the scene's lowest natural frequencies at rest, this many (``frequency_1_hz``, ...:
+        :func:`volspring.modes.solve_modes`, with the scene's supports; deterministic); 0 measures none.
 
     Returns
     -------
@@ -105,6 +109,14 @@ def run_scene(scene: dict, *, base=".", probes=None) -> dict:
                 numbers = compare_final_state(scene, built.comparison, result.state.x)
                 record["measured"].update({f"compare_{name}": value for name, value in numbers.items()})
                 record["seconds"]["compare"] = time.perf_counter() - comparing
+            if frequencies:
+                from volspring.modes import solve_modes
+
+                solving = time.perf_counter()
+                modes = solve_modes(built.scene, count=int(frequencies))
+                record["measured"].update({f"frequency_{k + 1}_hz": float(value)
+                                           for k, value in enumerate(modes.frequencies)})
+                record["seconds"]["modes"] = time.perf_counter() - solving
         except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
             record.update(status="diverged", error=_one_line(error), error_type=type(error).__name__)
         except Exception as error:  # a value the scene or the API refuses, a solver that failed: the run's row

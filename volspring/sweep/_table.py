@@ -27,8 +27,9 @@ __all__ = ["RUNS_FOLDER", "TABLE_NAME", "TIMING_COLUMNS", "read_record", "record
 TABLE_NAME = "results.csv"
 RUNS_FOLDER = "runs"
 RECORD_NAME = "run.json"
-#: Wall time of the run, its building (meshing, model, scene), its stepping and its comparison (if any) [s].
-TIMING_COLUMNS = ("wall_seconds", "build_seconds", "stepping_seconds", "compare_seconds")
+#: Wall time of the run, its building (meshing, model, scene), its stepping, its comparison and its modes (if
+#: any) [s].
+TIMING_COLUMNS = ("wall_seconds", "build_seconds", "stepping_seconds", "compare_seconds", "modes_seconds")
 
 
 def record_path(out, run_id: str) -> Path:

@@ -59,6 +59,9 @@ def build_parser() -> Parser:
     values.add_argument("--samples", type=int, metavar="N", help="draws of the --random ranges")
     values.add_argument("--seed", type=int, metavar="S", help="seed of the --random draws (default: the sweep "
                                                               "file's, else 0)")
+    values.add_argument("--frequencies", type=int, metavar="N",
+                        help="also measure the scene's N lowest natural frequencies at rest (columns frequency_1_hz, "
+                             "...; default: the sweep file's, else none)")
     values.add_argument("--probe", action="append", default=[], metavar="NAME=X,Y,Z",
                         help="also measure the displacement of the node nearest the point X,Y,Z [m] (columns "
                              "NAME_ux, NAME_uy, NAME_uz; repeatable)")
@@ -151,8 +154,12 @@ def _options(args) -> dict:
     if sweep_file is not None:
         args.samples = sweep_file.samples if args.samples is None else args.samples
         args.seed = sweep_file.seed if args.seed is None else args.seed
+        args.frequencies = sweep_file.frequencies if args.frequencies is None else args.frequencies
         args.probe = [f"{name}={','.join(map(repr, point))}" for name, point in sweep_file.probes.items()] + args.probe
     args.seed = 0 if args.seed is None else args.seed
+    args.frequencies = 0 if args.frequencies is None else args.frequencies
+    if args.frequencies < 0:
+        raise ValueError(f"--frequencies {args.frequencies} is not >= 0")
     if random and args.samples is None:
         raise ValueError("--random needs --samples N, the number of draws")
     if args.samples is not None and not random:
@@ -176,7 +183,7 @@ def _options(args) -> dict:
         probes[name] = coordinates
     check_output_folder(args.out, label="--out")
     return {"parameters": grid, "random": random, "samples": args.samples, "seed": args.seed, "probes": probes,
-            "rerun_failed": args.rerun_failed}
+            "frequencies": args.frequencies, "rerun_failed": args.rerun_failed}
 
 
 def _sweep(args, options, callback):
