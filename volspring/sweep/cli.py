@@ -5,9 +5,10 @@
 file that names its scene and values: :mod:`volspring.sweep._file`) runs every combination
 (:func:`volspring.sweep.run_sweep`) and writes ``DIR/results.csv`` (one row per run) and
 ``DIR/runs/RUN_ID/run.json``. Runs already in ``DIR`` are not computed again, so an interrupted sweep is resumed by
-running the same command; a failing run is a row with its error, and the sweep goes on. By default the runs go to a local cluster of ``--workers`` processes (one BLAS thread
-each); ``--scheduler ADDRESS`` sends them to a running Dask scheduler (``dask scheduler``, ``dask worker``);
-``--workers 0`` runs them one after the other in this process.
+running the same command; a failing run is a row with its error, and the sweep goes on. By default the runs go to
+a local cluster of ``--workers`` processes (one BLAS thread each); ``--scheduler ADDRESS`` sends them to a running
+Dask scheduler (``dask scheduler``, ``dask worker``); ``--workers 0`` runs them one after the other in this
+process.
 
 Exit status, as every volspring command (:mod:`meshing._command_line`): 0 every run has its row (failed runs
 included: the summary counts them), 1 some runs were lost to the cluster (run the command again), 2 a bad command
