@@ -30,13 +30,15 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import contextvars
 import os
 import signal
 import sys
 
 __all__ = ["EXIT_DIVERGED", "EXIT_DONE", "EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_STATUS_EPILOG", "EXIT_USAGE",
            "HelpFormatter", "LOG_INTERVAL", "Parser", "Stopped", "UsageError", "add_common_options", "advance_to",
-           "error_line", "progress_bar", "progress_mode", "signals_as_exceptions", "stdout_to_stderr", "version_text"]
+           "command_name", "error_line", "invoked_as", "progress_bar", "progress_mode", "signals_as_exceptions",
+           "stderr_line", "stdout_to_stderr", "version_text"]
 
 EXIT_DONE = 0         #: the command did what it was asked
 EXIT_FAILED = 1       #: the run failed while computing or writing
@@ -52,6 +54,34 @@ exit status:
   3    the simulation diverged
   130  interrupted by Ctrl-C; 143 by SIGTERM, 129 by SIGHUP (128 + the signal number)
 Errors are one line on stderr, "PROG: error: ..."; the summary is on stdout, progress and logs on stderr."""
+
+#: The name a command was invoked by when it is not its own script's: ``volspring sim`` for ``volspring-sim``.
+_INVOKED_AS: contextvars.ContextVar[str | None] = contextvars.ContextVar("volspring_invoked_as", default=None)
+
+
+@contextlib.contextmanager
+def invoked_as(name: str):
+    """Within the block, commands call themselves ``name`` (the dispatcher's ``volspring sim``) in their usage,
+    ``--help``, ``--version`` and every line they write on stderr, instead of their script's name."""
+    token = _INVOKED_AS.set(name)
+    try:
+        yield
+    finally:
+        _INVOKED_AS.reset(token)
+
+
+def command_name(prog: str) -> str:
+    """The name the running command was invoked by: ``prog`` (``volspring-sim``), or ``volspring sim`` under the
+    dispatcher (:func:`invoked_as`).
+
+    >>> with invoked_as("volspring sim"):
+    ...     command_name("volspring-sim")
+    'volspring sim'
+    >>> command_name("volspring-sim")
+    'volspring-sim'
+    """
+    return _INVOKED_AS.get() or prog
+
 
 #: Seconds between two progress lines when stderr is not a terminal (a log file, a CI job): a line every few
 #: seconds says the run is alive without filling the log.
@@ -83,6 +113,8 @@ class Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs):
         kwargs.setdefault("formatter_class", HelpFormatter)
+        if kwargs.get("prog") is not None:
+            kwargs["prog"] = command_name(kwargs["prog"])
         super().__init__(*args, **kwargs)
         if self.epilog is None:
             self.epilog = EXIT_STATUS_EPILOG.replace("PROG", self.prog)
@@ -120,7 +152,8 @@ def add_common_options(parser, *, prog: str | None = None, progress: str = "prog
         What the progress shows, for the help text.
     """
     prog = prog or getattr(parser, "prog", None)
-    parser.add_argument("--version", action="version", version=version_text(prog),
+    parser.add_argument("--version", action="version", version=version_text(None if prog is None else
+                                                                             command_name(prog)),
                         help="print the version of volspring and exit")
     parser.add_argument("-q", "--quiet", action="store_true",
                         help="no progress and no summary (errors and warnings still go to stderr)")
@@ -143,8 +176,13 @@ def error_line(prog: str, message, status: int) -> int:
     'volspring-mesh: error: size = 0 is not a positive length\\n'
     """
     text = " ".join(str(message).split())  # one line, whatever the message holds
-    print(f"{prog}: error: {text}", file=sys.stderr)
+    stderr_line(prog, f"error: {text}")
     return status
+
+
+def stderr_line(prog: str, text: str) -> None:
+    """Print ``PROG: TEXT`` on stderr, ``PROG`` the name the command was invoked by (:func:`command_name`)."""
+    print(f"{command_name(prog)}: {text}", file=sys.stderr)
 
 
 def progress_mode(args, stream=None):

@@ -31,7 +31,7 @@ from pathlib import Path
 
 from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, Parser, Stopped, UsageError,
                                    add_common_options, advance_to, error_line, progress_bar, progress_mode,
-                                   signals_as_exceptions, stdout_to_stderr)
+                                   signals_as_exceptions, stderr_line, stdout_to_stderr)
 from collections.abc import Sequence
 
 __all__ = ["main", "sidecar_path"]
@@ -270,7 +270,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (KeyboardInterrupt, Stopped) as stop:
             bar.close()
             name = stop.signal_name if isinstance(stop, Stopped) else "SIGINT (Ctrl-C)"
-            print(f"{PROG}: interrupted by {name}; no output file was left behind", file=sys.stderr)
+            stderr_line(PROG, f"interrupted by {name}; no output file was left behind")
             return stop.status if isinstance(stop, Stopped) else EXIT_INTERRUPTED
     bar.close()
     _print_warnings(caught)
@@ -281,7 +281,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _print_warnings(caught) -> None:
     for warning in caught:
-        print(f"{PROG}: warning: {' '.join(str(warning.message).split())}", file=sys.stderr)
+        stderr_line(PROG, f"warning: {' '.join(str(warning.message).split())}")
 
 
 if __name__ == "__main__":

@@ -92,21 +92,35 @@ def test_version_everywhere(capsys):
     for name, main in MAINS.items():
         assert main(["--version"]) == 0
         assert capsys.readouterr().out == f"volspring-{name} (volspring {number})\n"
-        assert volspring_main([name, "--version"]) == 0  # the same through the dispatcher
-        assert capsys.readouterr().out == f"volspring-{name} (volspring {number})\n"
+        assert volspring_main([name, "--version"]) == 0  # through the dispatcher, named as typed
+        assert capsys.readouterr().out == f"volspring {name} (volspring {number})\n"
 
 
-@pytest.mark.parametrize("argv", [["volspring", "sim", "--version"], ["volspring-mesh", "--version"],
-                                  ["volspring-sim", "--version"], ["volspring-validate", "--version"],
-                                  ["python", "-m", "volspring", "validate", "--version"]])
-def test_the_installed_scripts_and_python_m_volspring(argv):
+@pytest.mark.parametrize("name", ["mesh", "sim", "validate", "sweep"])
+def test_under_the_dispatcher_a_command_is_named_as_it_was_typed(name, tmp_path, capsys):
+    # The usage, the help's last line and every error line say "volspring sim", not the alias volspring-sim.
+    assert volspring_main([name, "--no-such-flag"]) == 2
+    one_line(capsys.readouterr().err, f"volspring {name}: error: ")
+    assert volspring_main([name, "--help"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith(f"usage: volspring {name} ") and f'"volspring {name}: error: ..."' in text
+    assert meshing._command_line.command_name(f"volspring-{name}") == f"volspring-{name}"  # the name is restored
+
+
+@pytest.mark.parametrize("argv, name", [
+    (["volspring", "sim", "--version"], "volspring sim"), (["volspring-mesh", "--version"], "volspring-mesh"),
+    (["volspring-sim", "--version"], "volspring-sim"), (["volspring-validate", "--version"], "volspring-validate"),
+    (["python", "-m", "volspring", "validate", "--version"], "volspring validate")])
+def test_the_installed_scripts_and_python_m_volspring(argv, name):
+    from importlib.metadata import version
+
     # The console scripts pip installed from [project.scripts], and `python -m volspring`.
     command = [sys.executable, *argv[1:]] if argv[0] == "python" else [str(SCRIPTS / argv[0]), *argv[1:]]
     if argv[0] != "python" and not Path(command[0]).exists():
         pytest.skip(f"{argv[0]} is not installed next to {sys.executable} (pip install -e . installs it)")
     done = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stderr == "", done.stderr
-    assert re.fullmatch(r"volspring-\w+ \(volspring [\w.+-]+\)\n", done.stdout), done.stdout
+    assert done.stdout == f"{name} (volspring {version('volspring')})\n", done.stdout
 
 
 # ---------------------------------------------------------------------- the same flags everywhere, old spellings kept

@@ -396,7 +396,8 @@ def test_the_readme_scene_runs_and_its_bodies_land_on_the_plane(tmp_path, capsys
     import re
 
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    blocks = re.findall(r"```toml\n(.*?)```", readme, flags=re.S)
+    section = readme[readme.index("## Scene files"):]
+    blocks = re.findall(r"```toml\n(.*?)```", section[:section.index("\n## ", 1)], flags=re.S)
     assert len(blocks) == 1, "the README's scene file section has one TOML block"
     (tmp_path / "scene.toml").write_text(blocks[0])
     state, model = end_state(capsys, tmp_path / "scene.toml", tmp_path / "out", "--duration", "0.1")

@@ -51,6 +51,17 @@ def test_the_example_sweep_file_reads_as_written():
     assert is_sweep_file({"scene": "a.toml"}) and not is_sweep_file({"bodies": [], "scene": "x"})
 
 
+def test_the_readme_shows_the_example_sweep_file():
+    import re
+    import tomllib
+
+    readme = (ROOT / "README.md").read_text()
+    section = readme[readme.index("## Sweeps"):]
+    block, = re.findall(r"```toml\n(.*?)```", section[:section.index("\n## ", 1)], flags=re.S)
+    shown, example = tomllib.loads(block), tomllib.loads(TRADE.read_text())
+    assert shown == {key: value for key, value in example.items() if key != "description"}
+
+
 def test_a_sweep_file_is_the_same_sweep_as_its_flags(tmp_path, capsys):
     (tmp_path / "small.toml").write_text(SMALL)
     assert main([tmp_path / "small.toml", "--workers", "0", "--out", tmp_path / "file", "--quiet"]) == 0

@@ -50,7 +50,8 @@ import warnings
 import numpy as np
 
 from meshing._command_line import (EXIT_DIVERGED, EXIT_DONE, EXIT_FAILED, EXIT_USAGE, Parser, UsageError,
-                                   add_common_options, advance_to, error_line, progress_bar, progress_mode)
+                                   add_common_options, advance_to, error_line, progress_bar, progress_mode,
+                                   stderr_line)
 from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
 from collections.abc import Sequence
 
@@ -257,7 +258,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             if run is not None:
                 with contextlib.suppress(OSError):
                     run.finish("interrupted")
-            print(f"{PROG}: interrupted by {interruption_name(stop)}; {_left_behind(run)}", file=sys.stderr)
+            stderr_line(PROG, f"interrupted by {interruption_name(stop)}; {_left_behind(run)}")
             return exit_status(stop)
     bar.close()
     if args.quiet:

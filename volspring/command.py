@@ -27,7 +27,8 @@ import difflib
 import importlib
 import sys
 
-from meshing._command_line import EXIT_DONE, EXIT_FAILED, EXIT_STATUS_EPILOG, EXIT_USAGE, error_line, version_text
+from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_STATUS_EPILOG, EXIT_USAGE, error_line, invoked_as,
+                                   version_text)
 from collections.abc import Sequence
 
 __all__ = ["GROUP", "commands", "main"]
@@ -95,4 +96,5 @@ def main(argv: Sequence[str] | None = None) -> int:
         run = found[name].load()
     except ImportError as error:
         return error_line(PROG, f"the command {name} cannot be loaded ({found[name].value}): {error}", EXIT_FAILED)
-    return run(rest)
+    with invoked_as(f"{PROG} {name}"):  # its usage, --version and messages say "volspring sim", as typed
+        return run(rest)

@@ -17,7 +17,7 @@ import sys
 import time
 import warnings
 
-from meshing._command_line import stdout_to_stderr
+from meshing._command_line import stderr_line, stdout_to_stderr
 from volspring.cli import _build
 from volspring.cli._arguments import (CHECKPOINT_NAME, EXIT_DIVERGED, EXIT_FAILED, EXIT_USAGE, PROG, SERIES_NAME,
                                       SURFACE_NAME, InputError, UsageError, build_parser, check_arguments,
@@ -66,7 +66,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         bad_input = isinstance(error, (InputError, StepTooLarge)) or not where.running
         return fail(error, EXIT_USAGE if bad_input else EXIT_FAILED)
     except (KeyboardInterrupt, Interrupted) as stop:  # Ctrl-C, SIGTERM, SIGHUP: one line, no traceback
-        print(f"{PROG}: interrupted by {interruption_name(stop)}{where.describe(argv)}", file=sys.stderr)
+        stderr_line(PROG, f"interrupted by {interruption_name(stop)}{where.describe(argv)}")
         return exit_status(stop)
 
 

@@ -6,11 +6,10 @@ Only the command line prints (the library logs and calls back); everything here 
 
 from __future__ import annotations
 
-import sys
 
 import numpy as np
 
-from meshing._command_line import advance_to, error_line, progress_bar, progress_mode
+from meshing._command_line import advance_to, error_line, progress_bar, progress_mode, stderr_line
 from volspring.cli._arguments import CHECKPOINT_NAME, PROG, SERIES_NAME, SURFACE_NAME
 
 __all__ = ["Progress", "fail", "show_warning", "summary", "summary_lines"]
@@ -23,7 +22,7 @@ def fail(message, status) -> int:
 
 def show_warning(message, category, filename, lineno, file=None, line=None):
     """A :func:`warnings.showwarning` that prints one line, ``volspring-sim: warning: ...``, on stderr."""
-    print(f"{PROG}: warning: {' '.join(str(message).split())}", file=sys.stderr)
+    stderr_line(PROG, f"warning: {' '.join(str(message).split())}")
 
 
 class Progress:

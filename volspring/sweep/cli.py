@@ -33,7 +33,7 @@ import sys
 from pathlib import Path
 
 from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_USAGE, Parser, UsageError, add_common_options,
-                                   advance_to, error_line, progress_bar, progress_mode)
+                                   advance_to, error_line, progress_bar, progress_mode, stderr_line)
 
 __all__ = ["build_parser", "main"]
 
@@ -114,8 +114,8 @@ def main(argv=None) -> int:
         return error_line(PROG, error, EXIT_USAGE)
     except (KeyboardInterrupt, Interrupted) as stop:
         bar.close()
-        print(f"{PROG}: interrupted by {interruption_name(stop)}; the runs finished are in {args.out}: run the same "
-              "command to compute the others", file=sys.stderr)
+        stderr_line(PROG, f"interrupted by {interruption_name(stop)}; the runs finished are in {args.out}: run the "
+                          "same command to compute the others")
         return exit_status(stop)
     except Exception as error:  # the cluster could not be started or reached
         return error_line(PROG, f"{type(error).__name__}: {error}", EXIT_FAILED)
