@@ -32,13 +32,12 @@ import argparse
 import contextlib
 import contextvars
 import os
-import signal
 import sys
 
 __all__ = ["EXIT_DIVERGED", "EXIT_DONE", "EXIT_FAILED", "EXIT_INTERRUPTED", "EXIT_STATUS_EPILOG", "EXIT_USAGE",
-           "HelpFormatter", "LOG_INTERVAL", "Parser", "Stopped", "UsageError", "add_common_options", "advance_to",
-           "command_name", "error_line", "invoked_as", "progress_bar", "progress_mode", "signals_as_exceptions",
-           "stderr_line", "stdout_to_stderr", "version_text"]
+           "HelpFormatter", "LOG_INTERVAL", "Parser", "UsageError", "add_common_options", "advance_to",
+           "command_name", "error_line", "invoked_as", "progress_bar", "progress_mode", "stderr_line",
+           "stdout_to_stderr", "version_text"]
 
 EXIT_DONE = 0         #: the command did what it was asked
 EXIT_FAILED = 1       #: the run failed while computing or writing
@@ -278,44 +277,3 @@ def stdout_to_stderr(enabled: bool = True):
             sys.stdout.flush()
         os.dup2(saved, 1)
         os.close(saved)
-
-
-class Stopped(BaseException):
-    """SIGTERM or SIGHUP inside :func:`signals_as_exceptions`; ``status`` is 128 + the signal number."""
-
-    def __init__(self, signum: int):
-        self.signal_name = signal.Signals(signum).name
-        self.status = 128 + int(signum)
-        super().__init__(f"interrupted by {self.signal_name}")
-
-
-@contextlib.contextmanager
-def signals_as_exceptions():
-    """Within the block (in the main thread), SIGTERM and SIGHUP raise :class:`Stopped`, which unwinds like
-    Ctrl-C so that temporary files are removed; the previous handlers are restored after it.
-
-    The commands of the upper layers use :func:`volspring._signals.handle_termination`, which also survives a
-    signal that lands in a finalizer; this is its small counterpart for ``volspring mesh``, which runs no
-    finalizer-heavy code and must not import a layer above ``meshing``.
-    """
-    import threading
-
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def handler(signum, frame):
-        raise Stopped(signum)
-
-    previous = {}
-    try:
-        for name in ("SIGTERM", "SIGHUP"):
-            signum = getattr(signal, name, None)
-            if signum is None or signal.getsignal(signum) == signal.SIG_IGN:
-                continue
-            previous[signum] = signal.getsignal(signum)
-            signal.signal(signum, handler)
-        yield
-    finally:
-        for signum, before in previous.items():
-            signal.signal(signum, signal.SIG_DFL if before is None else before)

@@ -2,7 +2,7 @@
 
 Every writer goes through :func:`atomic_path`: it writes a temporary file beside the target and
 renames it onto the target when the write succeeds. An exception (``KeyboardInterrupt`` and the
-termination signals that ``volspring._signals`` turns into exceptions included) removes the temporary
+termination signals that ``meshing._signals`` turns into exceptions included) removes the temporary
 file; only a process killed outright (SIGKILL, a power cut) leaves one behind. It lives in ``meshing``,
 the lowest layer, because the mesh writers use it too.
 
@@ -62,7 +62,7 @@ def atomic_path(path):
 
     Notes
     -----
-    On any exception, ``KeyboardInterrupt`` and ``volspring._signals.Interrupted``
+    On any exception, ``KeyboardInterrupt`` and ``meshing._signals.Interrupted``
     included, the temporary file is removed and ``path`` is left as it was.
 
     Examples
@@ -109,7 +109,7 @@ def atomic_path(path):
 def interruptions_first():
     """Within the block, an interruption that clean-up code masked with an error of its own is raised instead.
 
-    A signal turned into an exception (``KeyboardInterrupt``, ``volspring._signals.Interrupted``: both
+    A signal turned into an exception (``KeyboardInterrupt``, ``meshing._signals.Interrupted``: both
     derive from ``BaseException`` only) can arrive inside a library's writer, whose clean-up then fails
     on the half-done state and raises an ordinary error with the interruption as its context: zipfile,
     under ``np.savez``, raises "Can't close the ZIP file while there is an open writing handle". A

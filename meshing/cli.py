@@ -29,9 +29,10 @@ import time
 import warnings
 from pathlib import Path
 
-from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_USAGE, Parser, Stopped, UsageError,
+from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_USAGE, Parser, UsageError,
                                    add_common_options, advance_to, error_line, progress_bar, progress_mode,
-                                   signals_as_exceptions, stderr_line, stdout_to_stderr)
+                                   stderr_line, stdout_to_stderr)
+from meshing._signals import Interrupted, exit_status, handle_termination, interruption_name
 from collections.abc import Sequence
 
 __all__ = ["main", "sidecar_path"]
@@ -257,7 +258,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", UserWarning)
         try:
-            with signals_as_exceptions():
+            with handle_termination():
                 summary = _run(args, bar)
         except _BadInput as error:
             bar.close()
@@ -267,11 +268,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             bar.close()
             _print_warnings(caught)
             return error_line(PROG, error, EXIT_FAILED)
-        except (KeyboardInterrupt, Stopped) as stop:
+        except (KeyboardInterrupt, Interrupted) as stop:
             bar.close()
-            name = stop.signal_name if isinstance(stop, Stopped) else "SIGINT (Ctrl-C)"
-            stderr_line(PROG, f"interrupted by {name}; no output file was left behind")
-            return stop.status if isinstance(stop, Stopped) else EXIT_INTERRUPTED
+            stderr_line(PROG, f"interrupted by {interruption_name(stop)}; no output file was left behind")
+            return exit_status(stop)
     bar.close()
     _print_warnings(caught)
     if not args.quiet:

@@ -259,7 +259,7 @@ def test_a_stop_inside_the_archive_writer_surfaces_as_the_stop(tmp_path, monkeyp
     (143), once in a few hundred interrupted runs. The stop is raised, and no file is left behind."""
     import zipfile
 
-    from volspring._signals import Terminated
+    from meshing._signals import Terminated
 
     def stopped(handle):  # the signal lands as the member's handle closes: zipfile still counts it open
         raise Terminated(15)

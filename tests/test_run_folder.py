@@ -18,7 +18,7 @@ import pytest
 import meshing._io
 from meshing._io import atomic_path, is_temporary_name, remove_stale_temporaries
 from volspring import Material, Model, State
-from volspring._signals import Terminated
+from meshing._signals import Terminated
 from volspring.output import (BlenderWriter, ParaViewWriter, RunFolder, RunFolderRefused, check_output_folder,
                               read_manifest, read_pvd)
 from volspring.output.run_folder import MANIFEST_NAME

@@ -11,7 +11,7 @@ import time
 import pytest
 
 from meshing._io import is_temporary_name
-from volspring._signals import Interrupted, Terminated, exit_status, handle_termination, interruption_name
+from meshing._signals import Interrupted, Terminated, exit_status, handle_termination, interruption_name
 
 pytestmark = pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
 
@@ -22,7 +22,7 @@ WRITER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
     from meshing._io import atomic_path
-    from volspring._signals import exit_status, handle_termination, interruption_name, Interrupted
+    from meshing._signals import exit_status, handle_termination, interruption_name, Interrupted
 
     def write(target):
         with atomic_path(target) as tmp:

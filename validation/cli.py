@@ -52,7 +52,7 @@ import numpy as np
 from meshing._command_line import (EXIT_DIVERGED, EXIT_DONE, EXIT_FAILED, EXIT_USAGE, Parser, UsageError,
                                    add_common_options, advance_to, error_line, progress_bar, progress_mode,
                                    stderr_line)
-from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
+from meshing._signals import Interrupted, exit_status, handle_termination, interruption_name
 from collections.abc import Sequence
 
 __all__ = ["main"]

@@ -51,7 +51,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return done.code if isinstance(done.code, int) else 0
     if args.verbose:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
-    from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
+    from meshing._signals import Interrupted, exit_status, handle_termination, interruption_name
 
     where = RunProgress()
     try:

@@ -60,7 +60,7 @@ import socket
 from pathlib import Path
 
 from meshing._io import atomic_path, remove_stale_temporaries
-from volspring._signals import Interrupted
+from meshing._signals import Interrupted
 from volspring.output.run_files import _inside, _remove_listed, check_output_folder
 from volspring.output.run_manifest import (MANIFEST_FORMAT, MANIFEST_NAME, MANIFEST_VERSION, STATUSES, _describe,
                                            _now, _status, read_manifest)

@@ -93,7 +93,7 @@ def main(argv=None) -> int:
         logging.basicConfig(level=logging.INFO, format="%(name)s: %(message)s", stream=sys.stderr)
     else:  # a run's warnings are in its record (column warnings), not on the terminal, one per run
         logging.getLogger("volspring").addHandler(logging.NullHandler())
-    from volspring._signals import Interrupted, exit_status, handle_termination, interruption_name
+    from meshing._signals import Interrupted, exit_status, handle_termination, interruption_name
 
     try:
         options = _options(args)

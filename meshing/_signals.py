@@ -1,11 +1,14 @@
 """Termination signals as exceptions, so that a stopped command cleans up like an interrupted one.
 
+In ``meshing``, the lowest layer, so that every command (``volspring mesh`` as well as ``sim``, ``validate`` and
+``sweep``) stops the same way without importing a layer above its own.
+
 By default SIGTERM (``kill PID``, a job scheduler's or a container's stop) and SIGHUP (the
 terminal closed) end a Python process on the spot: no ``finally`` block runs, temporary files
 stay behind, a run folder's manifest still says "running". Inside :func:`handle_termination`
 they raise :class:`Terminated` instead, which unwinds like Ctrl-C's ``KeyboardInterrupt``:
 :func:`meshing._io.atomic_path` removes its temporary file, a
-:class:`volspring.output.RunFolder` is marked interrupted, and the command exits with the
+:class:`volspring.output.RunFolder` (a layer above) is marked interrupted, and the command exits with the
 conventional status 128 + signal number (:func:`exit_status`: 143 for SIGTERM, 129 for SIGHUP,
 130 for Ctrl-C).
 
@@ -15,7 +18,7 @@ errors (``except Exception``) does not swallow them.
 Examples
 --------
 >>> import os, signal
->>> from volspring._signals import Terminated, exit_status, handle_termination
+>>> from meshing._signals import Terminated, exit_status, handle_termination
 >>> try:
 ...     with handle_termination():
 ...         os.kill(os.getpid(), signal.SIGTERM)
