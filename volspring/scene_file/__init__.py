@@ -91,7 +91,7 @@ Examples
 >>> assemble_scene(read_scene(path, overrides=["bodies[0].material.nu=0.7"]), base=path.parent)
 Traceback (most recent call last):
 ...
-volspring.scene_file._keys.SceneFileError: bodies[0].material.nu = 0.7 is not in (-1, 0.5)
+volspring.scene_file._schema.SceneFileError: bodies[0].material.nu = 0.7 is not in (-1, 0.5)
 """
 
 from __future__ import annotations
@@ -102,7 +102,8 @@ from pathlib import Path
 
 from volspring.scene_file._assemble import AssembledScene, assemble_scene
 from volspring.scene_file._compare import compare_final_state, comparison_line
-from volspring.scene_file._keys import SCENE, SceneFileError, joined, resolved, unknown_key
+from volspring.scene_file._keys import SCENE, resolved
+from volspring.scene_file._schema import SceneFileError, joined, unknown_key
 from typing import Any
 from collections.abc import Sequence
 import os

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from volspring.scene_file._keys import SceneFileError, joined
+from volspring.scene_file._schema import SceneFileError, joined
 import os
 
 __all__ = ["AssembledScene", "assemble_scene", "at"]

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from volspring.scene_file._keys import SceneFileError, joined
+from volspring.scene_file._schema import SceneFileError, joined
 
 if TYPE_CHECKING:
     from volspring.comparisons import StaticProblem

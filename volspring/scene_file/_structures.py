@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from volspring.scene_file._assemble import _rotation, at
-from volspring.scene_file._keys import SceneFileError
+from volspring.scene_file._schema import SceneFileError
 
 __all__ = ["JoinedSurface", "Part", "build_part", "part_extras"]
 

@@ -124,7 +124,7 @@ def read_sweep_file(path: str | os.PathLike[str]) -> SweepFile:
         For a missing sweep file.
     """
     from volspring.scene_file import SceneFileError, load_toml
-    from volspring.scene_file._keys import unknown_key
+    from volspring.scene_file._schema import unknown_key
 
     path = Path(path)
     table = load_toml(path)
