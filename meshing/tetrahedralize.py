@@ -97,11 +97,12 @@ def tetrahedralize(surface: trimesh.Trimesh | Shape | str | os.PathLike[str], *,
         delaunay: a crease the enclosing band does not round (faces meeting at a smaller angle sample a curved surface).
         A smooth scan with coarse facets wants 180.
     enclosing_band : bool, optional
-        delaunay only: move the surface vertices outward by 1.5 x the estimated chord sag of their facets (curvature
-        from normals; flat facets and creases do not move), so that the tets enclose the smooth shape the facets are
-        chords of; ``False`` keeps the surface vertices on the input surface (the tets' boundary is then the input
+        delaunay only: move the surface vertices outward by 1.5 x the estimated chord sag of their facets (the height
+        of their PN patches, from normals; flat facets and creases do not move), so that the tets enclose the smooth
+        shape the facets are chords of, and split the curved edges whose flipped diagonal Delaunay took under that
+        shape; ``False`` keeps the surface vertices on the input surface (the tets' boundary is then the input
         facets). Default (None): on for built-in shapes, off for loaded surfaces (on the coarse bunny it keeps the OBJ's
-        vertices inside the tets but adds 10% of volume: its sag estimate on coarse facets is large). gmsh's meshes are
+        vertices inside the tets but adds 11% of volume: its sag estimate on coarse facets is large). gmsh's meshes are
         not affected.
     verbose : bool
         let gmsh print its progress
