@@ -22,12 +22,13 @@ Examples
 True
 """
 
-from volspring.sweep._engine import BLAS_ENVIRONMENT, SweepResult, run_id, run_sweep, sweep_client
+from volspring.sweep._cluster import BLAS_ENVIRONMENT, run_calls, sweep_client
+from volspring.sweep._engine import SweepResult, run_id, run_sweep
 from volspring.sweep._file import SweepFile, is_sweep_file, read_sweep_file
 from volspring.sweep._measure import MEASURED, SOLVER, run_scene
 from volspring.sweep._parameters import parse_grid, parse_range, sweep_combinations
 from volspring.sweep._table import TABLE_NAME, TIMING_COLUMNS
 
 __all__ = ["BLAS_ENVIRONMENT", "MEASURED", "SOLVER", "SweepFile", "SweepResult", "TABLE_NAME", "TIMING_COLUMNS",
-           "is_sweep_file", "parse_grid", "parse_range", "read_sweep_file", "run_id", "run_scene", "run_sweep",
-           "sweep_client", "sweep_combinations"]
+           "is_sweep_file", "parse_grid", "parse_range", "read_sweep_file", "run_calls", "run_id", "run_scene",
+           "run_sweep", "sweep_client", "sweep_combinations"]

@@ -3,7 +3,7 @@
 :func:`run_sweep` resolves every combination in the calling process (a run is identified by the hash of its
 resolved scene, :func:`run_id`), skips those whose record is already on disk, and runs the others: in this
 process with ``client=None``, else as one Dask task each on ``client``'s cluster (:func:`sweep_client` makes a
-local cluster of worker processes, or connects to an existing scheduler). What a task carries is the resolved
+local cluster of worker processes, or connects to an existing scheduler: :mod:`volspring.sweep._cluster`). What a task carries is the resolved
 scene (a small dict) and the options; the bytes of the mesh files the scenes name are scattered once and shared
 by every task (:func:`_mesh_files`), so the workers need no access to the caller's files. Records come back to the
 calling process, which writes them as they arrive (:mod:`volspring.sweep._table`).
@@ -23,24 +23,26 @@ import json
 import logging
 import os
 import time
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from meshing._io import atomic_path
+from volspring.sweep._cluster import BLAS_ENVIRONMENT, finishing
 from volspring.sweep._measure import run_scene
 from volspring.sweep._parameters import sweep_combinations
 from volspring.sweep._table import TABLE_NAME, read_record, table_columns, write_record, write_table
 
-__all__ = ["BLAS_ENVIRONMENT", "RECORD_FORMAT", "SweepResult", "run_id", "run_sweep", "sweep_client"]
+if TYPE_CHECKING:
+    from distributed import Client
+
+__all__ = ["RECORD_FORMAT", "SweepResult", "run_id", "run_sweep"]
 
 logger = logging.getLogger(__name__)
 
 #: The version of a run record's content: part of every run id, so records of another version are run again.
 RECORD_FORMAT = 1
-#: Environment of the local cluster's workers: one BLAS/OpenMP thread each, so that N workers use N cores
-#: instead of fighting over them (and every run's arithmetic is the serial run's).
-BLAS_ENVIRONMENT = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: Seconds between two rewrites of results.csv while runs finish (it is also written at the end).
 TABLE_INTERVAL = 2.0
 
@@ -80,7 +82,8 @@ class SweepResult:
         return sum(record["status"] != "done" for record in self.records)
 
 
-def run_id(scene: dict, *, files=None, probes=None, frequencies=0) -> str:
+def run_id(scene: dict, *, files: Mapping[str, str] | None = None, probes: Mapping[str, Sequence[float]] | None = None,
+           frequencies: int = 0) -> str:
     """The id of a run: 16 hex digits of the SHA-256 of its resolved scene, the contents of the mesh files it
     reads (``files``: name -> SHA-256), what it measures (probes, frequencies) and :data:`RECORD_FORMAT`.
 
@@ -93,8 +96,11 @@ def run_id(scene: dict, *, files=None, probes=None, frequencies=0) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
-def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=None, seed=0, client=None,
-              probes=None, frequencies=0, callback=None, rerun_failed=False) -> SweepResult:
+def run_sweep(scene_path: str | os.PathLike[str], parameters: Mapping[str, Sequence[Any]] | None = None,
+              out: str | os.PathLike[str] = "sweep", *, random: Mapping[str, Sequence[float]] | None = None,
+              samples: int | None = None, seed: int = 0, client: Client | None = None,
+              probes: Mapping[str, Sequence[float]] | None = None, frequencies: int = 0,
+              callback: Callable[[dict, int, int], None] | None = None, rerun_failed: bool = False) -> SweepResult:
     """Run a scene file once per combination of parameter values; write one record per run and a table.
 
     Parameters
@@ -151,8 +157,9 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
     raw = load_toml(scene_path)
     combinations = sweep_combinations(parameters, random=random, samples=samples, seed=seed)
     probes = {name: [float(value) for value in point] for name, point in (probes or {}).items()}
-    measures = {"probes": probes, "frequencies": int(frequencies)}
-    resolved, refused = [], []
+    measures: dict[str, Any] = {"probes": probes, "frequencies": int(frequencies)}
+    resolved: list[dict | None] = []
+    refused: list[SceneFileError] = []
     for combination in combinations:
         scene = copy.deepcopy(raw)
         try:
@@ -166,7 +173,7 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
         raise refused[0]
     files = _mesh_files([scene for scene in resolved if scene is not None], scene_path.parent)
     digests = {name: entry["sha256"] for name, entry in files.items()}
-    runs = []  # (run id, combination, resolved scene or None, refusal or None)
+    runs: list[tuple[str, dict, dict | None, SceneFileError | None]] = []  # (id, combination, scene, refusal)
     refusals = iter(refused)
     for combination, scene in zip(combinations, resolved):
         if scene is None:
@@ -174,7 +181,8 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
             runs.append((run_id({"refused": combination, "error": str(error)}), combination, None, error))
         else:
             used = {name: digests[name] for name in _mesh_names(scene) if name in digests}
-            runs.append((run_id(scene, files=used, **measures), combination, scene, None))
+            runs.append((run_id(scene, files=used, probes=probes, frequencies=int(frequencies)), combination, scene,
+                         None))
 
     layout = (list(combinations[0]), probes)
     _write_json(out / "sweep.json", {"scene_file": str(scene_path.resolve()), "grid": dict(parameters or {}),
@@ -191,7 +199,8 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
     skipped, total = len({identifier for identifier, *_ in runs if identifier in on_disk}), len(set(r[0] for r in runs))
     logger.info("sweep of %d runs: %d on disk, %d to compute", total, skipped, len(pending))
     table = out / TABLE_NAME
-    progress = {"done": skipped, "executed": 0, "written": time.monotonic()}
+    progress = {"done": skipped, "executed": 0}
+    written = [time.monotonic()]  # when the table was last written
 
     def finish(identifier, record):
         combination, scene, _ = pending[identifier]
@@ -202,16 +211,19 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
         on_disk[identifier] = record
         progress["done"] += 1
         progress["executed"] += 1
-        if time.monotonic() - progress["written"] > TABLE_INTERVAL:
+        if time.monotonic() - written[0] > TABLE_INTERVAL:
             _write_table(table, runs, on_disk, layout)
-            progress["written"] = time.monotonic()
+            written[0] = time.monotonic()
         if callback is not None:
             callback(record, progress["done"], total)
 
     for identifier, (combination, scene, error) in list(pending.items()):
         if scene is None:  # refused before running: its row says why
             finish(identifier, _refused_record(error))
-    runnable = {identifier: scene for identifier, (_, scene, _) in pending.items() if scene is not None}
+    runnable: dict[str, dict] = {}
+    for identifier, (_, scene, _) in pending.items():
+        if scene is not None:
+            runnable[identifier] = scene
     base = str(scene_path.parent.resolve())
     missing = []
     try:
@@ -232,30 +244,22 @@ def run_sweep(scene_path, parameters=None, out="sweep", *, random=None, samples=
 
 def _run_on_cluster(client, runnable, base, measures, files, finish) -> list:
     """Submit one task per run, ``finish`` each record as it arrives; returns the run ids lost to the cluster."""
-    from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
     shared = client.scatter([files], hash=False)[0] if files else None  # once, shared by every task
-    futures = {client.submit(_run_task, scene, base=base, measures=measures, files=shared,
-                             key=f"volspring-sweep-{identifier}", pure=False): identifier
-               for identifier, scene in runnable.items()}
+    calls = {identifier: (_run_task, (scene,), {"base": base, "measures": measures, "files": shared})
+             for identifier, scene in runnable.items()}
     missing = []
-    try:
-        for future in as_completed(futures):
-            identifier = futures[future]
-            try:
-                record = future.result()
-            except KilledWorker as error:  # the run killed its worker at every try (memory, a crash): its row
-                record = {**_refused_record(error), "error_type": "KilledWorker"}
-            except Exception as error:  # lost to the cluster, not the run's failure: no record, run it next time
-                logger.warning("run %s: no result from the cluster (%s: %s)", identifier, type(error).__name__, error)
-                missing.append(identifier)
-                continue
-            finally:
-                future.release()
-            finish(identifier, record)
-    finally:
-        client.cancel(list(futures))  # an interruption leaves no task running on a shared cluster
+    for identifier, future in finishing(client, calls, prefix="volspring-sweep"):
+        try:
+            record = future.result()
+        except KilledWorker as error:  # the run killed its worker at every try (memory, a crash): its row
+            record = {**_refused_record(error), "error_type": "KilledWorker"}
+        except Exception as error:  # lost to the cluster, not the run's failure: no record, run it next time
+            logger.warning("run %s: no result from the cluster (%s: %s)", identifier, type(error).__name__, error)
+            missing.append(identifier)
+            continue
+        finish(identifier, record)
     return missing
 
 
@@ -323,58 +327,10 @@ def _write_table(table, runs, on_disk, layout) -> None:
     """Write the records of ``runs`` on disk as the table; ``layout`` is ``(swept key paths, probes)``."""
     rows = [{**on_disk[identifier], "parameters": combination} for identifier, combination, *_ in runs
             if identifier in on_disk]
-    write_table(table, rows, table_columns(*layout, rows))
+    parameters, probes = layout
+    write_table(table, rows, table_columns(parameters, probes, rows))
 
 
 def _write_json(path, data) -> None:
     with atomic_path(path) as temporary:
         temporary.write_text(json.dumps(data, indent=1, default=str) + "\n")
-
-
-@contextmanager
-def sweep_client(*, workers=None, scheduler=None):
-    """A Dask client for :func:`run_sweep`: on a new local cluster, or on the scheduler at ``scheduler``.
-
-    Parameters
-    ----------
-    workers : int, optional
-        Worker processes of the local cluster, one thread each with :data:`BLAS_ENVIRONMENT` (default: the CPU
-        count). Not used with ``scheduler``.
-    scheduler : str, optional
-        The address of a running scheduler (``tcp://host:8786``, started by ``dask scheduler``); its workers are
-        the cluster's own (start them with ``--nthreads 1`` and ``OMP_NUM_THREADS=1``).
-
-    Yields
-    ------
-    distributed.Client
-        Closed (and the local cluster shut down) when the block ends.
-    """
-    import dask
-    from distributed import Client, LocalCluster
-
-    if scheduler is not None:
-        with Client(scheduler) as client:
-            client.run(_warm_up)
-            yield client
-        return
-    workers = (os.cpu_count() or 1) if workers is None else int(workers)
-    if workers < 1:
-        raise ValueError(f"workers = {workers} is not >= 1")
-    # Dask's statistical profiler samples the running task every 10 ms: 5-10% of a run's time, for a profile
-    # nobody reads here. The workers take the configuration as it is when they start.
-    with dask.config.set({"distributed.worker.profile.enabled": False}), \
-            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
-                         env=dict(BLAS_ENVIRONMENT), silence_logs=logging.ERROR) as cluster, Client(cluster) as client:
-        client.run(_warm_up)
-        logger.info("local cluster of %d worker processes; its dashboard: %s", workers, client.dashboard_link)
-        yield client
-
-
-def _warm_up() -> None:
-    """Import what a run needs (1-3 s: scipy, pyamg, gmsh), on every worker at once as the cluster starts,
-    rather than in the first run of each."""
-    import importlib
-
-    for name in ("volspring.sweep._measure", "volspring.scene_file._assemble", "volspring.simulate",
-                 "volspring.integrators.implicit", "meshing.tetrahedralize", "pyamg"):
-        importlib.import_module(name)

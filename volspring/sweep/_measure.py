@@ -31,9 +31,12 @@ scene's N lowest natural frequencies at rest, ``frequency_1_hz`` ... (time ``sec
 from __future__ import annotations
 
 import math
+import os
 import time
 import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -46,7 +49,8 @@ MEASURED = ("t_end", "displacement_max", "displacement_max_node", "volume_change
 SOLVER = ("steps", "cg_iterations_mean", "cg_iterations_max", "cg_iterations_total")
 
 
-def run_scene(scene: dict, *, base=".", probes=None, frequencies=0) -> dict:
+def run_scene(scene: dict, *, base: str | os.PathLike[str] = ".", probes: Mapping[str, Sequence[float]] | None = None,
+              frequencies: int = 0) -> dict:
     """Assemble, step and measure one resolved scene; never raises for a failure of the run itself.
 
     Parameters
@@ -84,14 +88,16 @@ def run_scene(scene: dict, *, base=".", probes=None, frequencies=0) -> dict:
     from volspring.simulate import simulate
 
     started = time.perf_counter()
-    record = {"status": "done", "error": None, "error_type": None, "solver": dict.fromkeys(SOLVER),
-              "measured": {}, "seconds": {"wall": None, "build": None, "stepping": None}, "warnings": []}
+    seconds: dict[str, float | None] = {"wall": None, "build": None, "stepping": None}
+    measured: dict[str, Any] = {}
+    record: dict[str, Any] = {"status": "done", "error": None, "error_type": None, "solver": dict.fromkeys(SOLVER),
+                              "measured": measured, "seconds": seconds, "warnings": []}
     statistics = StepStatistics()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             built = assemble_scene(scene, base=Path(base))
-            record["seconds"]["build"] = time.perf_counter() - started
+            seconds["build"] = time.perf_counter() - started
             dt, integrator = scene["integrator"]["dt"], scene["integrator"]
             steps = max(int(math.ceil(scene["duration"] / dt - 1e-9)), 0)  # as volspring-sim counts them
             runaway = integrator.get("runaway_factor")
@@ -100,23 +106,22 @@ def run_scene(scene: dict, *, base=".", probes=None, frequencies=0) -> dict:
             with statistics.watching(built.integrator):
                 result = simulate(built.scene, built.integrator, duration=steps * dt, dt=dt, state=built.state,
                                   frame_dt=scene["output"]["frame_dt"], guard=integrator["guard"], **checks)
-            record["seconds"]["stepping"] = time.perf_counter() - stepping
-            record["measured"] = _measured(built.scene, result.state, probes or {})
+            seconds["stepping"] = time.perf_counter() - stepping
+            measured.update(_measured(built.scene, result.state, probes or {}))
             if built.comparison is not None:  # the scene's [compare]: its numbers are measured quantities too
                 from volspring.scene_file import compare_final_state
 
                 comparing = time.perf_counter()
                 numbers = compare_final_state(scene, built.comparison, result.state.x)
-                record["measured"].update({f"compare_{name}": value for name, value in numbers.items()})
-                record["seconds"]["compare"] = time.perf_counter() - comparing
+                measured.update({f"compare_{name}": value for name, value in numbers.items()})
+                seconds["compare"] = time.perf_counter() - comparing
             if frequencies:
                 from volspring.modes import solve_modes
 
                 solving = time.perf_counter()
                 modes = solve_modes(built.scene, count=int(frequencies))
-                record["measured"].update({f"frequency_{k + 1}_hz": float(value)
-                                           for k, value in enumerate(modes.frequencies)})
-                record["seconds"]["modes"] = time.perf_counter() - solving
+                measured.update({f"frequency_{k + 1}_hz": float(value) for k, value in enumerate(modes.frequencies)})
+                seconds["modes"] = time.perf_counter() - solving
         except FloatingPointError as error:  # SimulationDiverged, or a spring collapsed to zero length
             record.update(status="diverged", error=_one_line(error), error_type=type(error).__name__)
         except Exception as error:  # a value the scene or the API refuses, a solver that failed: the run's row
@@ -126,7 +131,7 @@ def run_scene(scene: dict, *, base=".", probes=None, frequencies=0) -> dict:
     record["solver"] = {"steps": solver["steps"], "cg_iterations_mean": iterations.get("mean"),
                         "cg_iterations_max": iterations.get("max"), "cg_iterations_total": iterations.get("total")}
     record["warnings"] = list(dict.fromkeys(_one_line(warning.message) for warning in caught))
-    record["seconds"]["wall"] = time.perf_counter() - started
+    seconds["wall"] = time.perf_counter() - started
     return record
 
 

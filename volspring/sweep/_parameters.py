@@ -26,13 +26,17 @@ from __future__ import annotations
 import itertools
 import math
 import numbers
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 __all__ = ["parse_grid", "parse_range", "sweep_combinations"]
 
 
-def sweep_combinations(grid=None, *, random=None, samples=None, seed=0) -> list:
+def sweep_combinations(grid: Mapping[str, Sequence[Any]] | None = None, *,
+                       random: Mapping[str, Sequence[float]] | None = None, samples: int | None = None,
+                       seed: int = 0) -> list:
     """The combinations of a sweep, in a fixed order.
 
     Parameters

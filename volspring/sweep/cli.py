@@ -29,7 +29,9 @@ Examples
 from __future__ import annotations
 
 import logging
+import os
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 from meshing._command_line import (EXIT_DONE, EXIT_FAILED, EXIT_USAGE, Parser, UsageError, add_common_options,
@@ -80,7 +82,7 @@ def build_parser() -> Parser:
     return parser
 
 
-def main(argv=None) -> int:
+def main(argv: Sequence[str | os.PathLike[str]] | None = None) -> int:
     """Run ``volspring sweep`` with ``argv`` (default ``sys.argv[1:]``); returns the exit status."""
     argv = sys.argv[1:] if argv is None else [str(token) for token in argv]
     try:
@@ -192,7 +194,7 @@ def _sweep(args, options, callback):
 
     if args.workers == 0:
         return run_sweep(args.scene, out=args.out, callback=callback, **options)
-    from volspring.sweep._engine import sweep_combinations
+    from volspring.sweep import sweep_combinations
 
     # The combinations are checked before a cluster is started: a bad parameter costs no worker.
     sweep_combinations(options["parameters"], random=options["random"], samples=options["samples"],
