@@ -22,7 +22,7 @@ import numpy as np
 from meshing.geometry import BarycentricFrames, barycentric_frames, nearest_surface_points
 from meshing.mesh import TetMesh
 from meshing.tolerances import ON_SURFACE
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, ClassVar
 
 if TYPE_CHECKING:
     import trimesh
@@ -51,6 +51,16 @@ class WeightedAnchor:
 
     #: What the nodes are, in messages.
     node_owner = "the model's"
+
+    # The fields every subclass has (declared here for the methods below; not fields of this class).
+    __dataclass_fields__: ClassVar[dict[str, dataclasses.Field[Any]]]
+    nodes: np.ndarray
+    weights: np.ndarray
+    points: np.ndarray
+    faces: np.ndarray | None
+    outside: np.ndarray
+    outside_distance: np.ndarray
+    node_count: int
 
     def __post_init__(self):
         for field in dataclasses.fields(self):
@@ -322,7 +332,8 @@ def _locate_in_grid(corners, points, frames: BarycentricFrames, tolerance) -> np
 
     point_cells = np.floor((points - grid_origin) / cell).astype(np.int64)
     in_grid = ((point_cells >= 0) & (point_cells < shape)).all(axis=1)
-    point_keys = _cell_keys(*np.where(in_grid[:, None], point_cells, 0).T, shape)
+    cell_i, cell_j, cell_k = np.where(in_grid[:, None], point_cells, 0).T
+    point_keys = _cell_keys(cell_i, cell_j, cell_k, shape)
     start = np.searchsorted(keys, point_keys, side="left")
     count = np.where(in_grid, np.searchsorted(keys, point_keys, side="right") - start, 0)
 

@@ -179,7 +179,8 @@ def nearest_surface_points(points: ArrayLike, vertices: ArrayLike, faces: ArrayL
     from scipy.spatial import cKDTree
 
     points = np.asarray(points, dtype=np.float64)
-    corners = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    faces = np.asarray(faces)
+    corners = np.asarray(vertices, dtype=np.float64)[faces]
     centroids = corners.mean(axis=1)
     radius = np.linalg.norm(corners - centroids[:, None], axis=2).max()
     tree = cKDTree(centroids) if tree is None else tree

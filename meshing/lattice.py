@@ -46,9 +46,11 @@ from functools import cached_property
 import numpy as np
 
 from meshing.anchoring import WeightedAnchor, _surface_arrays
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, SupportsInt
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from numpy.typing import ArrayLike
     import trimesh
 
@@ -198,7 +200,7 @@ class Lattice:
         """(k,) int64 -- the node at each grid index (k, 3), -1 where the lattice has none."""
         index = np.asarray(index, dtype=np.int64).reshape(-1, 3)
         keys, shape = self._node_table[0], self._node_shape
-        valid = ((index >= 0) & (index < shape)).all(axis=1)
+        valid = np.all((index >= 0) & (index < shape), axis=1)
         query = self._keys(np.where(valid[:, None], index, 0), shape)
         where = np.minimum(np.searchsorted(keys, query), len(keys) - 1)
         return np.where(valid & (keys[where] == query), where, -1)
@@ -208,7 +210,7 @@ class Lattice:
         index = np.asarray(index, dtype=np.int64).reshape(-1, 3)
         shape = self._node_shape
         keys = self._keys(self.cells, shape)
-        valid = ((index >= 0) & (index < shape)).all(axis=1)
+        valid = np.all((index >= 0) & (index < shape), axis=1)
         query = self._keys(np.where(valid[:, None], index, 0), shape)
         where = np.minimum(np.searchsorted(keys, query), len(keys) - 1)
         return np.where(valid & (keys[where] == query), where, -1)
@@ -313,7 +315,7 @@ def _unique_pairs(pairs, weights, node_count) -> tuple:
     return np.stack([unique // node_count, unique % node_count], axis=1), summed
 
 
-def box_lattice(cells: ArrayLike, size: ArrayLike, *, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Lattice:
+def box_lattice(cells: Iterable[SupportsInt], size: ArrayLike, *, origin: ArrayLike = (0.0, 0.0, 0.0)) -> Lattice:
     """The full lattice of a box of ``cells`` cubic cells: the nodes of ``structured_box(cells, size)``, in order.
 
     Parameters

@@ -101,6 +101,7 @@ class TetMesh:
         tets.setflags(write=False)
         object.__setattr__(self, "points", points)
         object.__setattr__(self, "tets", tets)
+        self._volumes: np.ndarray  # (m,) float: not a field, set here (frozen, hence object.__setattr__)
         object.__setattr__(self, "_volumes", volumes)
 
     # ------------------------------------------------------------------ constructors

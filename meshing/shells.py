@@ -146,7 +146,7 @@ def _checked_layers(layers) -> int:
 def _checked_thickness(thickness) -> float:
     if isinstance(thickness, bool) or not isinstance(thickness, numbers.Real):
         raise ValueError(f"thickness = {thickness!r} is not a number; expected a shell thickness > 0 [m]")
-    if not np.isfinite(thickness) or thickness <= 0:
+    if not np.isfinite(float(thickness)) or thickness <= 0:
         raise ValueError(f"thickness = {thickness} is not > 0 and finite; expected a shell thickness > 0 [m]")
     return float(thickness)
 

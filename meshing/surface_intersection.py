@@ -90,6 +90,7 @@ def _crossing_face_pairs(mesh) -> np.ndarray:
             crossing = _faces_cross(first_tri[between] + step, second_tri[between])
             overlapping = np.intersect1d(overlapping, body_pair[crossing])
             first_move = crossing if first_move is None else first_move
+        assert first_move is not None  # set by the first of the six moves
         hit[between] = first_move & np.isin(body_pair, overlapping)
     return pairs[hit]
 

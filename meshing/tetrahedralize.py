@@ -157,7 +157,7 @@ def tetrahedralize(surface: trimesh.Trimesh | Shape | str | os.PathLike[str], *,
         shape = isinstance(surface, Shape)
         if enclosing_band is None:
             enclosing_band = shape
-        if shape:
+        if isinstance(surface, Shape):
             surface = surface.surface(size=size)
         points, tets = _delaunay_tets(surface, size, seed, movable_surface=shape, enclosing_band=enclosing_band,
                                       feature_angle=feature_angle)

@@ -126,9 +126,12 @@ def warn_if_large(points: ArrayLike, *, units: str, scale: float | None, name: s
     stacklevel : int
         Passed to :func:`warnings.warn`: 3 points at the caller of the reader that calls this.
     """
-    if units != "m" or scale is not None or len(points) == 0:
+    if units != "m" or scale is not None:
         return
-    diagonal = float(np.linalg.norm(np.ptp(np.asarray(points, dtype=np.float64), axis=0)))
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) == 0:
+        return
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
     if not diagonal > LARGE_BODY_DIAGONAL:
         return
     message = (f"{name} is {diagonal:.3g} m across (bounding-box diagonal), more than {LARGE_BODY_DIAGONAL:g} m: "
@@ -138,7 +141,7 @@ def warn_if_large(points: ArrayLike, *, units: str, scale: float | None, name: s
     warnings.warn(message, UserWarning, stacklevel=stacklevel)
 
 
-def add_unit_arguments(parser: argparse.ArgumentParser, *, applies_to: str,
+def add_unit_arguments(parser: argparse.ArgumentParser | argparse._ArgumentGroup, *, applies_to: str,
                        scale_applies_to: str | None = None) -> None:
     """Add ``--units {m,cm,mm}`` and ``--scale FACTOR`` to an ``argparse`` parser.
 

@@ -377,6 +377,7 @@ def test_bad_values_are_one_line_naming_the_key_path(capsys, override, message):
     ('[[bodies]]\nshape = "box:1,0.1,0.1"\nmesh = "b.vtu"\n', "bodies[0] gives mesh and shape; expected one"),
     ('[[bodies]\n', "is not valid TOML"),
     ('[[bodies]]\nshape = "box:1,0.1,0.1"\nzzz = 1\n', "bodies[0].zzz is not a known key; expected one of: name, "),
+    ('bodies = []\n', "bodies = [] holds no body; expected at least one [[bodies]] table"),
     ('[[bodies]]\nshape = "box:1,0.1,0.1"\n[[fields]]\ntype = "wind"\ndirection = [1, 0, 0]\nrate = -1\n',
      "fields[0].rate = -1.0 is not finite and >= 0"),
 ])

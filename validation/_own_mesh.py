@@ -34,7 +34,6 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from validation.boundary import Traction
-    from numpy.typing import ArrayLike
 
 __all__ = ["CLAMP_TOLERANCE", "check_held", "own_mesh_case", "parse_region"]
 
@@ -71,7 +70,7 @@ def parse_region(text: str, mesh: TetMesh) -> Region:
 
 
 def own_mesh_case(mesh: TetMesh, clamp: Callable[[np.ndarray], np.ndarray], *, material: Material,
-                  gravity: ArrayLike = (0.0, 0.0, -9.81), tractions: Sequence[Traction] = (),
+                  gravity: Sequence[float] | np.ndarray | None = (0.0, 0.0, -9.81), tractions: Sequence[Traction] = (),
                   source: str = "mesh") -> Case:
     """Any tet mesh with a clamp region and loads.
 

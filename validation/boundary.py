@@ -74,7 +74,7 @@ class Clamp:
     """
 
     region: object
-    components: object = "xyz"
+    components: str | Sequence[int] = "xyz"
     displacement: object = (0.0, 0.0, 0.0)
 
     @property

@@ -146,6 +146,7 @@ def cantilever_modes(*, per_height: int = 2, count: int = 4) -> Case:
     """The gravity cantilever's lowest ``count`` vibration frequencies (clamped at x = 0)."""
     case = cantilever_gravity(per_height=per_height)
     beam = case.beam
+    assert beam is not None  # cantilever_gravity's case has its beam
     frequencies = analytic.cantilever_frequencies(beam.length, beam.width, beam.height, E=case.material.E,
                                                   density=case.material.density, count=2)
     return Case("cantilever_modes", "Bending frequencies of the cantilever", "modes", case.mesh, case.material,

@@ -130,7 +130,7 @@ def _field_name(group: str, name: str) -> str:
 def _answers(case: Case, rules, models, note, answer) -> dict:
     """``{"springs": {rule: ...}, "models": {rung: ...}}``: ``answer(field_name, model)`` of every model of
     :func:`_models`, the springs rung's answer reused from the same rule's, a refusal as ``{"refused": message}``."""
-    answers = {"springs": {}, "models": {}}
+    answers: dict[str, dict[str, Any]] = {"springs": {}, "models": {}}
     for group, name, model in _models(case, rules, models, note):
         if model is None:
             answers[group][name] = dict(answers["springs"][LADDER_RULE])
@@ -185,6 +185,8 @@ def compare_static(case: Case, *, rules: Sequence[str] = RULES, models: Sequence
         tip_nodes = np.zeros(case.mesh.node_count, bool)
         tip_nodes[worst] = True
         direction = reference[worst] / np.linalg.norm(reference[worst])
+    if direction is None:
+        raise ValueError(f"case {case.name!r} has tip_nodes but no tip_direction; give both or neither")
     measure = {"nodes": tip_nodes, "direction": direction}
     for element in elements:
         fem[element]["tip_deflection_m"] = tip_deflection(case, displacements[f"fem_{element}"], **measure)

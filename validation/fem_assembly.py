@@ -203,7 +203,7 @@ def mass_matrix(space: Space, density: float) -> sp.csr_matrix:
 
 def load_vector(space: Space, density: float, gravity: ArrayLike | None,
                 body_force: Callable[[np.ndarray], np.ndarray] | None, tractions: Sequence[Any],
-                point_forces: np.ndarray | None) -> np.ndarray:
+                point_forces: np.ndarray) -> np.ndarray:
     """(N,) float -- consistent nodal forces [N] of gravity [m/s^2], a body force callable [N/m^3], the
     resolved tractions (:func:`validation.boundary.resolve_tractions`) and (n, 3) point forces [N]."""
     basis = space.basis

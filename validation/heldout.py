@@ -43,6 +43,7 @@ from validation._case import Case
 from validation.boundary import Clamp
 from volspring.material import Material
 from volspring.regions import Box
+from typing import Any
 
 __all__ = [
     "DATA_FOLDER",
@@ -72,7 +73,7 @@ MESH_FILES = {
 
 #: How the project's own meshes were made: ``tetrahedralize(parse_shape(shape), size=size_m, seed=seed)``
 #: with gmsh (:func:`generate_mesh`); the version of gmsh that wrote the stored files.
-MESH_RECIPES = {
+MESH_RECIPES: dict[str, dict[str, Any]] = {
     "torus": {"shape": "torus:0.3,0.06", "size_m": 0.04, "seed": 1, "gmsh": "4.15.2"},
     "capsule": {"shape": "capsule:0.05,0.5", "size_m": 0.035, "seed": 1, "gmsh": "4.15.2"},
     "l_bracket": {"shape": "l_bracket:0.4,0.3,0.05,0.05", "size_m": 0.025, "seed": 1, "gmsh": "4.15.2"},

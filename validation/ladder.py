@@ -83,7 +83,7 @@ STATIC_REFERENCE = ("TH", "P2")
 LADDER_NUS = (0.1, 0.3, 0.45, 0.49)
 
 
-def parse_models(text: str) -> tuple:
+def parse_models(text: str | Sequence[str]) -> tuple[str, ...]:
     """Rungs from ``"NAME[,NAME...]"`` (or a sequence of names), in the ladder's order, each once.
 
     Raises
@@ -131,7 +131,7 @@ def rung_constants(models: Sequence[str] = VALIDATED_MODELS, nus: Sequence[float
         {"refused": message}}}``, nu written with ``:g``
     """
     mesh = uniaxial_compression(cells=cells).mesh
-    table = {rung: {} for rung in models}
+    table: dict[str, dict[str, dict[str, Any]]] = {rung: {} for rung in models}
     for nu in dict.fromkeys(float(nu) for nu in nus):
         material = Material(E=CUBE["E_pa"], nu=nu, density=CUBE["density_kg_per_m3"])
         for rung, model in _models_or_refusals(mesh, material, models).items():
@@ -180,7 +180,8 @@ def step_costs(case: Case, models: Sequence[str] = VALIDATED_MODELS, *, dt: floa
     if case.gravity is None and not case.tractions:
         case = dataclasses.replace(case, gravity=(0.0, 0.0, -9.81))
     timed = tuple(dict.fromkeys(("springs",) + tuple(models)))
-    runs, costs = {}, {}
+    runs: dict[str, dict[str, Any]] = {}
+    costs: dict[str, dict[str, Any]] = {}
     for rung, model in _models_or_refusals(case.mesh, case.material, timed).items():
         if isinstance(model, str):
             costs[rung] = {"refused": model}
@@ -303,7 +304,7 @@ def run_ladder(cases: Sequence[Case] = (), *, comparisons: Sequence[Comparison] 
     comparisons = list(comparisons)
     for case in cases:
         compare = compare_modes if case.kind == "modes" else compare_static
-        options = {} if case.kind == "modes" else {"elements": STATIC_REFERENCE}
+        options: dict[str, Any] = {} if case.kind == "modes" else {"elements": STATIC_REFERENCE}
         comparisons.append(compare(case, rules=(), models=models, folder=folder, progress=note, **options))
     rows = []
     for comparison in comparisons:

@@ -187,7 +187,7 @@ def case_supports(mesh: TetMesh, clamps: Any) -> tuple:
     node the later one's displacement counts, as in the FEM reference.
     """
     fixed, values = _clamp_masks(mesh, clamps)
-    supports = []
+    supports: list[Pins | Prescribed] = []
     for pattern in np.unique(fixed[fixed.any(axis=1)], axis=0):
         nodes = np.flatnonzero((fixed == pattern).all(axis=1))
         if pattern.all() and not values[nodes].any():
@@ -199,7 +199,9 @@ def case_supports(mesh: TetMesh, clamps: Any) -> tuple:
 
 def case_scene(case: Case, model: Model) -> Scene:
     """A volspring scene of the case: its clamps as supports, its tractions and gravity as forces."""
-    forces = [PointLoads(traction_forces(case.mesh, case.tractions))] if case.tractions else []
+    forces: list[PointLoads | Gravity] = []
+    if case.tractions:
+        forces.append(PointLoads(traction_forces(case.mesh, case.tractions)))
     if case.gravity is not None:
         forces.append(Gravity(g=tuple(case.gravity)))
     return Scene(model, forces=forces, supports=case_supports(case.mesh, case.clamps))

@@ -119,11 +119,12 @@ def refinement_study(levels: Sequence[int] = (1, 2, 4), *, reference_level: int 
                                           element="P2", **reference_case.fem_arguments())
     reference_tip = tip_deflection(reference_case, reference.displacement)
     models = ["fem_P1", "fem_P2"] + [f"springs_{rule}" for rule in rules]
-    tips = {name: [] for name in models}
+    tips: dict[str, list[float]] = {name: [] for name in models}
     node_counts, cells = [], []
     for level in levels:
         case = cantilever_gravity(per_height=level)
         node_counts.append(case.mesh.node_count)
+        assert case.cells is not None  # a structured mesh
         cells.append(list(case.cells))
         for element in ("P1", "P2"):
             note(f"refinement: {element} at {level} cells across ({case.mesh.node_count} nodes)")
@@ -263,6 +264,7 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps: dict[st
     steps = INTEGRATOR_STEPS if steps is None else steps
     case = cantilever_gravity(per_height=per_height)
     held = held_nodes(case)
+    assert held is not None and case.gravity is not None  # clamped whole, loaded by gravity
     model = spring_model(case.mesh, case.material, rule)
     note("speed: spring equilibrium and modes")
     equilibrium = spring_static(case, model).displacement
@@ -289,7 +291,7 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps: dict[st
     omega = omega_max(scene)
     base_step = 2.0 / omega
     rest_tip = case.mesh.points[case.tip_nodes] @ case.tip_direction
-    runs = []
+    runs: list[dict[str, Any]] = []
     for name, factors in steps.items():
         critical = critical_step(name, omega)
         unit = critical if 0 < critical < math.inf else base_step
@@ -303,8 +305,9 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps: dict[st
                 tips.append(float((state.x[case.tip_nodes] @ case.tip_direction - rest_tip).mean()))
                 modal.append(float(np.sum(weights * (state.x - x_equilibrium))))
 
-            record_run = {"integrator": name, "step_factor": float(factor),
-                          "step_unit": "critical step" if unit == critical else "2 / omega_max", "dt_s": dt}
+            record_run: dict[str, Any] = {
+                "integrator": name, "step_factor": float(factor),
+                "step_unit": "critical step" if unit == critical else "2 / omega_max", "dt_s": dt}
             start = time.perf_counter()
             try:
                 result = simulate(scene, name, duration=duration, dt=dt, frame_dt=max(frame_dt, dt), callback=record,
@@ -315,11 +318,11 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps: dict[st
                 record_run["diverged"] = str(error)
                 simulated = max(float(error.time), dt)
             elapsed = time.perf_counter() - start
-            if stable:
+            if result is not None:  # stable
                 simulated = float(result.state.t)
             record_run.update(stable=stable, simulated_s=simulated, wall_seconds=elapsed,
                               wall_seconds_per_simulated_second=elapsed / simulated)
-            if stable:
+            if result is not None:  # stable
                 settled = tips[-1]
                 frequency = _trajectory_frequency(np.array(times), np.array(modal), 0.0, drag_rate)
                 record_run.update(

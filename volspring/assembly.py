@@ -32,13 +32,19 @@ import scipy.sparse as sp
 from volspring._deprecation import deprecated_alias
 from volspring.elements.base import BlockMap
 from volspring.errors import SpringCollapsed
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol, cast
 
 if TYPE_CHECKING:
-    from numpy.typing import ArrayLike
+    from volspring.elements.base import ElementSet, OperatorLinearization
     from scipy import sparse
     from volspring.model import Model
     from scipy.sparse.linalg import LinearOperator
+
+    class _MatrixFree(Protocol):
+        """An element set applied as a product (``matrix_free``, see :class:`volspring.elements.ElementSet`)."""
+
+        def linearize_operator(self, x: np.ndarray, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
+                               damping_scale: float = 0.0) -> OperatorLinearization: ...
 
 __all__ = ["BlockPattern", "ModelLinearization", "eliminate_held", "held_unknowns", "stiffness_matrix"]
 
@@ -67,7 +73,7 @@ def __getattr__(name):
 class _Part:
     """One element set inside a pattern: how it is evaluated and where its blocks go."""
 
-    element_set: object  # the set as evaluated: renumbered (local) or the model's own
+    element_set: ElementSet  # the set as evaluated: renumbered (local) or the model's own
     order: np.ndarray | None  # model element of each evaluated element when renumbered, else None
     summation: sp.csr_matrix = None  # (nnzb, e b): block data = summation @ blocks.reshape(-1, 9)
     coupling: tuple = ()  # (rows, cols, owner, sign): free row, fixed column, block, sign
@@ -170,7 +176,8 @@ class BlockPattern:
         self.node_rank[self.node_order] = np.arange(n)
 
         # (row, col, owner, sign) of every block contribution of every set, in local numbering.
-        self.parts, entries = [], []
+        parts: list[_Part] = []
+        entries = []
         for element_set in model.elements:
             if self._applied(element_set):
                 part = _Part(element_set, None, operator=True)
@@ -192,8 +199,8 @@ class BlockPattern:
             part.coupling = (rows[coupled], cols[coupled], owner[coupled], sign[coupled])
             inside = (rows < f) & (cols < f)
             entries.append((rows[inside], cols[inside], owner[inside], sign[inside], e * layout.block_count))
-            self.parts.append(part)
-        self.parts = tuple(self.parts)
+            parts.append(part)
+        self.parts = tuple(parts)
 
         # Every free node has a diagonal block even when no element touches it (mass only).
         width = max(f, 1)
@@ -278,15 +285,16 @@ class BlockPattern:
         -------
         ModelLinearization
         """
-        options = dict(stiffness_scale=stiffness_scale, damping_scale=damping_scale,
-                       clamp_compression=clamp_compression)
+        options: dict[str, Any] = dict(stiffness_scale=stiffness_scale, damping_scale=damping_scale,
+                                       clamp_compression=clamp_compression)
         forces, parts = np.zeros((self.model.node_count, 3)), []
         for part in self.parts:
             if part.operator:
-                linearization = part.element_set.linearize_operator(x, v, stiffness_scale=stiffness_scale,
-                                                                   damping_scale=damping_scale)
+                matrix_free = cast("_MatrixFree", part.element_set)  # the sets applied as products have the method
+                linearization = matrix_free.linearize_operator(x, v, stiffness_scale=stiffness_scale,
+                                                               damping_scale=damping_scale)
                 forces += linearization.forces
-            elif part.local:
+            elif part.order is not None:  # part.local
                 try:
                     linearization = part.element_set.linearize(
                         x[self.node_order], None if v is None else v[self.node_order], **options)
@@ -300,7 +308,7 @@ class BlockPattern:
             parts.append(linearization)
         return ModelLinearization(forces, tuple(parts))
 
-    def dfdx_times(self, linearization: ModelLinearization | np.ndarray, u: np.ndarray) -> np.ndarray:
+    def dfdx_times(self, linearization: ModelLinearization, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- dF/dx @ u of all element sets at a linearization [N]."""
         out = np.zeros((self.model.node_count, 3))
         for part, lin in zip(self.parts, linearization.parts):
@@ -418,6 +426,9 @@ class BlockPattern:
                 out[:, c] -= np.bincount(rows, weights=contribution[:, c], minlength=len(out))
         out = out[self.node_rank]
         if self.has_operator:
+            if isinstance(linearization, np.ndarray):
+                raise ValueError("the model has element sets applied as products: boundary_coupling needs its "
+                                 "ModelLinearization, not a blocks array")
             fixed = prescribed.copy()
             fixed[self.free_nodes] = 0.0
             for part, lin in zip(self.parts, linearization.parts):
@@ -456,7 +467,7 @@ def stiffness_matrix(model: Model, x: np.ndarray | None = None, *, free: np.ndar
 
 
 
-def held_unknowns(pattern: BlockPattern, held: ArrayLike) -> np.ndarray:
+def held_unknowns(pattern: BlockPattern, held: np.ndarray) -> np.ndarray:
     """(3f,) bool -- which free unknowns of ``pattern`` a support holds (``held``: (n, 3) bool, as
     :attr:`volspring.Scene.held`); all False when only whole nodes are held."""
     return np.ascontiguousarray(held[pattern.free_nodes]).ravel()

@@ -44,7 +44,7 @@ import numpy as np
 from meshing._io import atomic_path, interruptions_first
 from volspring.scene import State
 import os
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from volspring.integrators.base import Integrator
@@ -101,8 +101,9 @@ def model_fingerprint(scene: Scene) -> dict:
 
     model = scene.model
     pins = np.zeros(0, dtype=np.int64) if scene.pins is None else scene.pins.nodes
-    arrays = {"rest positions": model.rest_positions, "springs": model.springs, "rest lengths": model.rest_lengths,
-              "stiffness": model.stiffness, "damping": model.damping, "masses": model.masses, "pinned nodes": pins}
+    arrays: dict[str, np.ndarray | dict] = {
+        "rest positions": model.rest_positions, "springs": model.springs, "rest lengths": model.rest_lengths,
+        "stiffness": model.stiffness, "damping": model.damping, "masses": model.masses, "pinned nodes": pins}
     # Parts that only exist in some scenes are listed only there, so older checkpoints still match.
     if scene.supports:
         arrays["held components"] = scene.held
@@ -187,7 +188,7 @@ def save_checkpoint(path: str | os.PathLike[str], state: State, *, scene: Scene 
     if any(given) and not all(given):
         raise ValueError("save_checkpoint records a run with scene, integrator and dt together; got only "
                          + ", ".join(name for name, ok in zip(("scene", "integrator", "dt"), given) if ok))
-    if all(given):
+    if scene is not None and integrator is not None and dt is not None:  # all(given)
         manifest["run"] = {"dt": float(dt), "integrator": _integrator_record(integrator), "rung": scene.model.rung,
                            "fingerprint": model_fingerprint(scene)}
     for name in ("x", "v"):
@@ -197,7 +198,7 @@ def save_checkpoint(path: str | os.PathLike[str], state: State, *, scene: Scene 
     path = Path(path)
     buffer = io.BytesIO()
     with interruptions_first():  # a stop inside savez surfaces as itself, not as zipfile's clean-up error
-        np.savez(buffer, **arrays)
+        np.savez(buffer, **arrays)  # type: ignore[arg-type]  # numpy's stub: a ** key could be allow_pickle
     with atomic_path(path) as tmp:
         tmp.write_bytes(buffer.getvalue())
     logger.debug("saved checkpoint at step %d (t = %g s) to %s", state.step, state.t, path)
@@ -338,7 +339,7 @@ def _flatten(memory, prefix, arrays) -> dict:
 
 
 def _unflatten(manifest, prefix, archive) -> dict:
-    memory = {}
+    memory: dict[str, Any] = {}
     for key, entry in manifest.items():
         name = f"{prefix}{_SEPARATOR}{key}"
         kind = entry["kind"]

@@ -174,7 +174,8 @@ class _PairProjection:
         length = np.linalg.norm(x[j] - x[i], axis=1)
         return (length - self._targets(length, self.lengths)) / self.lengths
 
-    def relax(self, x: ArrayLike, free: np.ndarray | None = None, *, iterations: int | None = None) -> RelaxationReport:
+    def relax(self, x: np.ndarray, free: np.ndarray | None = None, *,
+              iterations: int | None = None) -> RelaxationReport:
         """Project x in place: Gauss-Seidel sweeps, colour by colour, until the tolerance is met.
 
         Parameters

@@ -108,7 +108,7 @@ class TetInversion(NamedTuple):
         tets checked (0 for a model built from arrays)
     """
 
-    count: int
+    count: int  # type: ignore[assignment]  # public field name; it shadows tuple.count, which mypy refuses
     worst_volume_ratio: float
     tet_count: int
 

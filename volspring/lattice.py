@@ -60,7 +60,7 @@ import numpy as np
 
 from meshing.lattice import LATTICE_FAMILIES, Lattice, LatticeAnchor, anchor_lattice, box_lattice, voxelize
 from meshing.topology import SPRING_KINDS
-from volspring.elements import AngleSprings, Springs
+from volspring.elements import AngleSprings, ElementSet, Springs
 from volspring.material import Material, _real_number
 from volspring.model import Model
 from typing import TYPE_CHECKING, Any
@@ -238,7 +238,7 @@ def lattice_model(lattice: Lattice, material: Material, *, shear: bool = True, b
         m_i, m_j = masses[pairs[:, 0]], masses[pairs[:, 1]]
         damping = 2.0 * damping_ratio * np.sqrt(stiffness * m_i * m_j / (m_i + m_j))
     kinds = SPRING_KINDS.index("lattice_" + LATTICE_FAMILIES[0]) + family  # the families' kinds, in order
-    elements = [Springs(lattice.node_count, pairs, stiffness, damping, lengths, kinds)]
+    elements: list[ElementSet] = [Springs(lattice.node_count, pairs, stiffness, damping, lengths, kinds)]
     if angles and constants.joint > 0:
         triples, joint_weights = lattice.joints()
         elements.append(AngleSprings(lattice.node_count, triples, constants.joint * joint_weights, np.pi / 2))

@@ -28,9 +28,11 @@ from meshing.mesh import TetMesh
 from meshing.topology import SpringTopology, kind_counts, vector_lengths
 from collections.abc import Mapping
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from volspring.bodies import Body
     from numpy.typing import ArrayLike
 
@@ -106,10 +108,17 @@ class Model:
     topology: SpringTopology | None = None
     material: Material | None = None
     rule: str = "arrays"
-    node_body: np.ndarray | None = None
-    materials: tuple | None = None
-    body_names: tuple | None = None
+    # None (the default) is filled in by __post_init__: the attributes always hold the values.
+    node_body: np.ndarray = cast("np.ndarray", None)
+    materials: tuple = cast(tuple, None)
+    body_names: tuple = cast(tuple, None)
     rung: str = "springs"
+
+    if TYPE_CHECKING:  # what the constructor takes (__post_init__ checks and converts it, and fills in the defaults)
+        def __init__(self, rest_positions: ArrayLike, masses: ArrayLike, elements: Iterable[ElementSet] = (),
+                     topology: SpringTopology | None = None, material: Material | None = None, rule: str = "arrays",
+                     node_body: ArrayLike | None = None, materials: Sequence[Material | None] | None = None,
+                     body_names: Sequence[str] | None = None, rung: str = "springs") -> None: ...
 
     def __post_init__(self):
         x = _checked_positions("rest_positions", self.rest_positions)
@@ -142,7 +151,7 @@ class Model:
     @classmethod
     def from_arrays(cls, positions: ArrayLike, masses: ArrayLike, springs: ArrayLike, *,
                     stiffness: float | np.ndarray, damping: float | np.ndarray = 0.0,
-                    rest_lengths: np.ndarray | None = None, law: str = "hooke") -> "Model":
+                    rest_lengths: float | ArrayLike | None = None, law: str = "hooke") -> "Model":
         """A model from raw arrays (strings, custom networks, tests).
 
         Parameters

@@ -73,11 +73,15 @@ import numpy as np
 from meshing._archive import labelled_codes, read_archive, take_array, write_archive
 from meshing.topology import SPRING_KINDS
 from meshing.topology_io import topology_arrays, topology_from_arrays
-from volspring.elements import AngleSprings, CorotatedTets, DihedralSprings, NodalStrain, Springs
+from volspring.elements import AngleSprings, CorotatedTets, DihedralSprings, ElementSet, NodalStrain, Springs
 from volspring.elements.tet_kinematics import TetGradients
 from volspring.material import Material
 from volspring.model import Model
 import os
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 __all__ = ["ELEMENT_SET_TYPES", "MODEL_FORMAT", "MODEL_SUFFIX", "MODEL_VERSION", "load_model", "save_model"]
 
@@ -191,7 +195,8 @@ def _joints_from_file(kind, width):
 
 
 #: The element-set types a model file can hold: name in the file -> (type, its arrays, the set from arrays).
-ELEMENT_SET_TYPES = {"springs": (Springs, _springs_arrays, _springs_from_file),
+ELEMENT_SET_TYPES: dict[str, tuple[type[ElementSet], Callable[[Any], dict], Callable[..., ElementSet]]] = {
+                     "springs": (Springs, _springs_arrays, _springs_from_file),
                      "corotated_tets": (CorotatedTets, _corotated_arrays, _corotated_from_arrays),
                      "nodal_strain": (NodalStrain, _nodal_strain_arrays, _nodal_strain_from_arrays),
                      "angle_springs": (AngleSprings, _joint_arrays, _joints_from_file(AngleSprings, 3)),

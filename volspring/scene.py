@@ -32,6 +32,8 @@ from volspring.model import Model
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable
+
     from numpy.typing import ArrayLike
 
 __all__ = ["State", "Pins", "Scene"]
@@ -119,6 +121,11 @@ class Scene:
     supports: tuple = ()
     held: np.ndarray = field(init=False, repr=False)
 
+    if TYPE_CHECKING:  # what the constructor takes: any iterables, stored as tuples (__post_init__)
+        def __init__(self, model: Model, forces: Iterable[Any] = (), pins: Pins | None = None,
+                     obstacles: Iterable[Any] = (), constraints: Iterable[Any] = (),
+                     supports: Iterable[Pins | Prescribed | Sliding] = ()) -> None: ...
+
     def __post_init__(self):
         if not isinstance(self.model, Model):
             raise TypeError(f"model must be a volspring Model, got {type(self.model).__name__}")
@@ -166,7 +173,7 @@ class Scene:
         held.setflags(write=False)
         object.__setattr__(self, "held", held)
         # The model's discretisation where it depends on the supports (the smoothed rung's volume pairs).
-        object.__setattr__(self, "model", self.model.supported(held.all(axis=1)))
+        object.__setattr__(self, "model", self.model.supported(np.all(held, axis=1)))
 
     @property
     def all_supports(self) -> tuple:
@@ -176,7 +183,7 @@ class Scene:
     @cached_property
     def free(self) -> np.ndarray:
         """(n,) bool -- nodes with at least one free component (the unknowns of the linear systems)."""
-        return ~self.held.all(axis=1)
+        return ~np.all(self.held, axis=1)
 
     @cached_property
     def partly_held(self) -> bool:

@@ -135,6 +135,8 @@ class _EnergyMonitor:
         self.patience = int(runaway_checks)
         self.streak, self.last_excess = 0, -math.inf
         self.moving_pins = scene.pins is not None and scene.pins.motion is not None
+        # The moving pins' nodes, for their work (the methods below run only when the pins move).
+        self.pinned = scene.pins.nodes if scene.pins is not None else np.zeros(0, dtype=np.int64)
         if energy_limit is None:
             model = scene.model
             external = scene.external_forces(state.x, state.v, state.t)
@@ -160,12 +162,12 @@ class _EnergyMonitor:
 
     def _pin_forces(self, state):
         """(p, 3) every force on the pinned nodes but the pins' own [N]."""
-        return self.scene.forces_at(state.x, state.v, state.t)[self.scene.pins.nodes]
+        return self.scene.forces_at(state.x, state.v, state.t)[self.pinned]
 
     def _pin_work(self, before: State, after: State) -> float:
         """Work the moving pins did on the body over one step [J]: the kinetic energy the pinned
         nodes gained, less the work the other forces did on them (trapezoidal rule)."""
-        nodes = self.scene.pins.nodes
+        nodes = self.pinned
         masses = self.scene.model.masses[nodes]
         gained = 0.5 * float(np.sum(masses[:, None] * (after.v[nodes] ** 2 - before.v[nodes] ** 2)))
         forces_after = self._pin_forces(after)
@@ -297,7 +299,8 @@ def simulate(scene: Scene, integrator: Integrator | str, *, duration: float, dt:
 
     monitor = _EnergyMonitor(scene, state, energy_limit=energy_limit, runaway_factor=runaway_factor,
                              runaway_checks=runaway_checks)
-    records = {key: [] for key in ("time", "step", "kinetic", "potential", "linear", "angular", "inverted", "ratio")}
+    records: dict[str, list] = {key: [] for key in ("time", "step", "kinetic", "potential", "linear", "angular",
+                                                    "inverted", "ratio")}
     frame_index = 0
     slack = _FRAME_SLACK * dt
 

@@ -55,6 +55,7 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
     from volspring.constraints import StrainLimit
+    from volspring.elements import ElementSet
 
 __all__ = ["CLOTH_SPRING_KINDS", "TWIST_MIN_TURN", "cloth_grid", "cloth_mesh", "cloth_springs", "cloth_strain_limit",
            "combine", "hair", "sheet_grid", "strand_points", "string"]
@@ -373,7 +374,8 @@ def sheet_grid(width: float, height: float, nx: int, ny: int, *, origin: ArrayLi
         raise ValueError(f"axes has {len(axes)} directions; expected 2 (width and height)")
     u, v = _unit("axes[0]", axes[0]), _unit("axes[1]", axes[1])
     if abs(float(u @ v)) > _ORTHOGONAL:
-        raise ValueError(f"axes = {[list(axes[0]), list(axes[1])]} are not orthogonal (cosine {float(u @ v):.3g})")
+        shown = [np.asarray(axes[0]).tolist(), np.asarray(axes[1]).tolist()]
+        raise ValueError(f"axes = {shown} are not orthogonal (cosine {float(u @ v):.3g})")
     i, j = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1))
     points = origin + (width / nx) * i.reshape(-1, 1) * u + (height / ny) * j.reshape(-1, 1) * v
     a = _grid_nodes(nx, np.arange(nx), np.arange(ny))  # (ny, nx) corner (i, j) of every cell
@@ -757,7 +759,7 @@ def combine(models: Sequence[Model]) -> Model:
     spring_set = Springs(n, pairs, np.concatenate([s.stiffness for s in springs]),
                          np.concatenate([s.damping for s in springs]),
                          np.concatenate([s.rest_lengths for s in springs]), kinds)
-    others = []
+    others: list[ElementSet] = []
     for k, model in enumerate(models):  # a loop over models and their element sets, not over nodes
         node_map = offsets[k] + np.arange(model.node_count)
         for element_set in model.elements:

@@ -68,6 +68,10 @@ class _NodeSupport:
     """What every support shares: checked nodes, and positions and velocities of its held components."""
 
     held: np.ndarray  # (3,) bool, set by each class
+    nodes: np.ndarray  # (p,) int64 after _prepare
+    # Fields of Pins and Prescribed (Sliding has neither: read them only when `moving`).
+    motion: Callable | None
+    velocity: Callable | None
 
     def _prepare(self):
         label = type(self).__name__
@@ -101,18 +105,20 @@ class _NodeSupport:
 
     def positions(self, rest_positions: np.ndarray, t: float) -> np.ndarray:
         """(p, 3) float -- where the nodes are at time t [m] (only the held components are used)."""
-        if not self.moving:
+        motion = getattr(self, "motion", None)  # what `moving` tests
+        if motion is None:
             return rest_positions[self.nodes]
-        return self._checked(self.motion(t), "motion", t)
+        return self._checked(motion(t), "motion", t)
 
     def velocities(self, t: float) -> np.ndarray:
         """(p, 3) float -- velocities of the nodes at time t [m/s] (only the held components are used)."""
-        if not self.moving:
+        motion = getattr(self, "motion", None)  # what `moving` tests
+        if motion is None:
             return np.zeros((len(self.nodes), 3))
         if self.velocity is not None:
             return self._checked(self.velocity(t), "velocity", t)
         h = 1e-6  # central difference: O(h^2) error, far below any simulation step
-        ahead, behind = (self._checked(self.motion(t + d), "motion", t) for d in (h, -h))
+        ahead, behind = (self._checked(motion(t + d), "motion", t) for d in (h, -h))
         return (ahead - behind) / (2 * h)
 
     def _checked(self, value, name, t):

@@ -17,6 +17,7 @@ import numpy as np
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
+    from matplotlib.artist import Artist
     from matplotlib.axes import Axes
 
 __all__ = ["log_ticks", "model_label", "render_figures"]
@@ -169,7 +170,7 @@ def render_figures(results: dict) -> dict:
             axes.grid(alpha=0.3, which="both")
             log_ticks(axes)
         # One legend for both panels, below them: inside a panel it hides the points.
-        legend = {}
+        legend: dict[str, Artist] = {}
         for axes in panels:
             for handle, label in zip(*axes.get_legend_handles_labels()):
                 legend.setdefault(label, handle)

@@ -29,7 +29,6 @@ import os
 
 if TYPE_CHECKING:
     from validation._case import Case
-    from volspring.output.run_folder import RunFolder
 
 __all__ = ["read_results", "validate", "write_outputs"]
 
@@ -37,10 +36,10 @@ __all__ = ["read_results", "validate", "write_outputs"]
 # so that replacing one there (a test's monkeypatch) replaces what runs here.
 
 
-def validate(out: np.ndarray, *, cases: Sequence[Case] | None = None, quick: bool = False, own_case: Case | None = None,
-             rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
-             folder: str | os.PathLike[str] | None = None, progress: Any = None, command: str | None = None,
-             record: RunFolder | None = None, sweeps: Sequence[dict] = ()) -> dict:
+def validate(out: str | os.PathLike[str], *, cases: Sequence[str] | None = None, quick: bool = False,
+             own_case: Case | None = None, rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
+             folder: str | os.PathLike[str] | None = None, progress: Any = None, command: Sequence[str] | None = None,
+             record: Callable[..., Any] | None = None, sweeps: Sequence[dict] = ()) -> dict:
     """:func:`~validation.report.runner.run_validation` then :func:`write_outputs` into ``out``; returns the results.
 
     ``record`` is passed on to :func:`write_outputs`; ``sweeps`` (:func:`validation.report.trade.read_sweep`) to

@@ -98,7 +98,7 @@ def versions() -> dict:
     """Versions of Python and the libraries the numbers depend on."""
     import importlib.metadata as metadata
 
-    found = {"python": platform.python_version()}
+    found: dict[str, str | None] = {"python": platform.python_version()}
     for name, distribution in (("numpy", "numpy"), ("scipy", "scipy"), ("scikit-fem", "scikit-fem"),
                                ("pyamg", "pyamg"), ("meshio", "meshio"), ("matplotlib", "matplotlib")):
         try:
@@ -180,19 +180,20 @@ def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, o
     def note(message):
         report(min(done / total, 1.0), message)
 
-    results = {"schema": SCHEMA, "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-               "quick": bool(quick), "versions": versions(), "units": UNITS,
-               "notes": NOTES if tasks else [], "rules": list(rules),
-               "models": list(models),
-               "settings": {key: value for key, value in settings.items() if key != "speed_steps"},
-               "cases": {}, "studies": {}, "sweeps": list(sweeps)}
+    results: dict[str, Any] = {
+        "schema": SCHEMA, "created": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "quick": bool(quick), "versions": versions(), "units": UNITS,
+        "notes": NOTES if tasks else [], "rules": list(rules),
+        "models": list(models),
+        "settings": {key: value for key, value in settings.items() if key != "speed_steps"},
+        "cases": {}, "studies": {}, "sweeps": list(sweeps)}
     results["settings"]["speed_steps"] = {key: list(value) for key, value in settings["speed_steps"].items()}
     artefacts = {}
     on_ladder, held_out = [], []  # comparisons made here with the rungs; held-out cases the ladder compares
     for name in tasks:
         note(name)
         if name in STATIC_CASES or name == "own_mesh":
-            case = own_case if name == "own_mesh" else build_case(name, quick=quick)
+            case = own_case if name == "own_mesh" and own_case is not None else build_case(name, quick=quick)
             comparison = compare_static(case, rules=rules, models=models, folder=folder, progress=note)
             results["cases"][name] = comparison.results
             artefacts[name] = comparison

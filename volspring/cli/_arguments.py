@@ -180,7 +180,7 @@ def region_materials(texts) -> dict:
         try:
             if not 2 <= len(parts) <= 4:
                 raise ValueError
-            tag, numbers = int(parts[0]), [float(part) for part in parts[1:]]
+            tag, numbers = int(parts[0]), [float(part) for part in parts[1:]]  # E, then nu and density if given
         except ValueError:
             raise InputError(f"--region-material {text!r} is not TAG:E[:NU[:DENSITY]] (an integer tag, then numbers "
                              "in Pa, -, kg/m^3)") from None
@@ -188,8 +188,7 @@ def region_materials(texts) -> dict:
             raise InputError(f"--region-material {text!r}: the tag {tag} is negative; expected a tag >= 0")
         if tag in found:
             raise InputError(f"--region-material gives tag {tag} twice")
-        numbers += [None] * (3 - len(numbers))
-        found[tag] = tuple(numbers)
+        found[tag] = tuple(numbers) + (None,) * (3 - len(numbers))
     return found
 
 

@@ -15,12 +15,18 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 
 from volspring.cli._arguments import (BODY_FLAGS, DEFAULT_NU, RUN_FLAGS, SCENE_SUFFIX, InputError, given_options,
                                       region_materials)
+
+if TYPE_CHECKING:
+    from volspring.comparisons import StaticProblem
+    from volspring.integrators.base import Integrator
+    from volspring.model import Model
+    from volspring.scene import Scene, State
 
 __all__ = ["BuiltRun", "anchored_surface", "build_model", "build_run", "build_scene", "gravity_vector",
            "is_scene_file", "load_mesh", "pinned_nodes", "model_record", "read_scene_file", "scene_with_flags",
@@ -31,15 +37,15 @@ class BuiltRun(NamedTuple):
     """What a run steps, from the flags or from a scene file."""
 
     origin: str  # where the body (bodies) came from, for the summary
-    model: object
+    model: Model
     record: dict  # the model's description, for the manifest
     summary_record: dict | None  # the same for the summary's model line (one body), or None
-    scene: object
-    integrator: object
-    state: object  # the initial state
-    triangles: object = None  # a scene's cloth triangles (model node numbers), for the ParaView surface series
+    scene: Scene
+    integrator: Integrator
+    state: State  # the initial state
+    triangles: np.ndarray | None = None  # a scene's cloth triangles (model node numbers), for the surface series
     render_surface: object = None  # a scene's surface for Blender when it has structures; None: the model's boundary
-    comparison: object = None  # a scene's [compare] body as a StaticProblem (volspring.comparisons), or None
+    comparison: StaticProblem | None = None  # a scene's [compare] body (volspring.comparisons), or None
 
 
 def build_run(args, note=None) -> BuiltRun:
@@ -344,7 +350,7 @@ def build_scene(args, model):
     from meshing.units import UNITS
     from volspring import Drag, Gravity, Pins, Scene
 
-    forces = []
+    forces: list = []
     gravity = gravity_vector(args.gravity)
     if gravity is not None:
         forces.append(Gravity(g=tuple(gravity)))
@@ -413,7 +419,7 @@ def anchored_surface(path, model, units, scale):
         surface = trimesh.load(path, force="mesh", process=False)
     except Exception as error:  # trimesh raises a variety of errors for unreadable files
         raise InputError(f"cannot read {path} as a surface mesh: {error}") from error
-    if len(getattr(surface, "vertices", ())) == 0:
+    if not isinstance(surface, trimesh.Trimesh) or len(surface.vertices) == 0:
         raise InputError(f"{path} holds no surface vertices")
     surface.vertices = surface.vertices * length_factor(units, scale)  # drawn with INPUT, in its units
     return anchor(model.topology.mesh, surface)

@@ -24,6 +24,7 @@ from volspring.cli._arguments import (CHECKPOINT_NAME, EXIT_DIVERGED, EXIT_FAILE
                                       joined_vectors)
 from volspring.cli._terminal import Progress, fail, show_warning, summary_lines
 from collections.abc import Sequence
+from typing import Any
 
 __all__ = ["Diverged", "RunProgress", "main", "run"]
 
@@ -152,7 +153,7 @@ def _run_in(args, where: RunProgress, folder) -> int:
     writers = _writers(args, built, first_frame, None if folder is None else folder.record)
     checks = {} if args.runaway_factor is None else {"runaway_factor": args.runaway_factor}
     progress = Progress(args=args, first_step=state.step, last_step=total_steps)
-    last = {"frames": 0, "state": state}
+    last: dict[str, Any] = {"frames": 0, "state": state}  # frames written by this run, and the latest
 
     def on_frame(frame_index, current):
         with timings.phase("writing"):
@@ -227,7 +228,7 @@ def _writers(args, built, first_frame, record):
     if args.out is None:
         return []
     model = built.model
-    writers = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame, record=record,
+    writers: list = [ParaViewWriter(args.out, model, name=SERIES_NAME, first_frame=first_frame, record=record,
                               triangles=built.triangles)]
     if args.blender:
         if args.render_surface is not None:

@@ -12,9 +12,11 @@ from functools import cached_property
 import numpy as np
 
 from meshing.mesh import TET_EDGES, TET_FACES, TetMesh
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
+    from collections.abc import Iterable, Sequence
+
     from numpy.typing import ArrayLike
     from volspring.model import Model
 
@@ -49,7 +51,10 @@ class CollisionBodies:
     """
 
     meshes: tuple
-    model_nodes: np.ndarray | None = None
+    model_nodes: np.ndarray = cast("np.ndarray", None)  # None (the default) is filled in by __post_init__
+
+    if TYPE_CHECKING:  # what the constructor takes (__post_init__ checks and converts it)
+        def __init__(self, meshes: Iterable[TetMesh], model_nodes: ArrayLike | None = None) -> None: ...
 
     def __post_init__(self):
         meshes = tuple(self.meshes)
@@ -224,7 +229,7 @@ class CollisionBodies:
         if isinstance(positions, np.ndarray):
             stacked = np.asarray(positions, dtype=np.float64)
         else:
-            parts = [np.asarray(p, dtype=np.float64) for p in positions]
+            parts = [np.asarray(p, dtype=np.float64) for p in cast("Sequence[ArrayLike]", positions)]  # one per body
             if len(parts) != self.body_count:
                 raise ValueError(f"got positions for {len(parts)} bodies, expected {self.body_count}")
             for b, (part, mesh) in enumerate(zip(parts, self.meshes)):

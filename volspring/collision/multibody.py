@@ -82,6 +82,7 @@ class MultiBodyModel:
         """The old view of a model built by ``Model.from_bodies(bodies)``."""
         bodies = tuple(bodies)
         collision_bodies = CollisionBodies.from_model(model)
+        assert model.topology is not None  # from_model refuses a model without a tet mesh
         mesh_count = model.topology.mesh.node_count
         nodes = [model.body_nodes(b) for b in range(model.body_count)]
         velocities = initial_velocities(bodies, model)

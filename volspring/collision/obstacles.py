@@ -309,7 +309,8 @@ class StaticTriangleMesh:
         is beside the sheet, not under it, and is left alone.
         """
         points = np.asarray(points, dtype=np.float64)
-        margin = (0.0 if self.closed else self.band) + thickness
+        band = 0.0 if self.closed or self.band is None else self.band  # an open mesh has one (__post_init__)
+        margin = band + thickness
         lo, hi = self.bounds[0] - margin, self.bounds[1] + margin
         near = np.flatnonzero(((points >= lo) & (points <= hi)).all(axis=1))
         face, closest, bary, distance = nearest_surface_points(points[near], self.vertices, self.faces, tree=self._tree)
@@ -364,7 +365,7 @@ class ObstacleContacts:
         return len(self.vertex)
 
 
-def obstacle_contacts(obstacles: Sequence[HalfSpace] | StaticTriangleMesh, positions: ArrayLike, *,
+def obstacle_contacts(obstacles: Sequence[HalfSpace | StaticTriangleMesh], positions: ArrayLike, *,
                       thickness: float = 0.0) -> ObstacleContacts:
     """Every vertex inside any static obstacle, or closer than ``thickness`` to its surface.
 

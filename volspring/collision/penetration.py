@@ -156,7 +156,7 @@ def _normalized(vectors):
     return np.divide(vectors, length[:, None], out=np.zeros_like(vectors), where=ok[:, None]), ok
 
 
-def _empty_hits():
+def _empty_hits() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3))
 
 

@@ -118,7 +118,7 @@ class SpatialHash:
         queries can keep only items of another group (or of the same group) without generating
         the rest.
         """
-        if not np.isfinite(cell_size) or cell_size <= 0:
+        if cell_size is None or not np.isfinite(cell_size) or cell_size <= 0:
             raise ValueError(f"cell_size = {cell_size} is not a positive length")
         table_size = _check_table_size(table_size)
         item_lo = np.asarray(item_lo, dtype=np.float64)
@@ -160,7 +160,10 @@ class SpatialHash:
         owner, cells = _box_cells(q_cell_lo, np.floor(query_hi / self.cell_size).astype(np.int64))
         base = cell_hash(cells, self.table_size) * self.group_count
         g = groups[owner]
-        search = lambda key: np.searchsorted(self.keys, key)  # noqa: E731
+
+        def search(key: np.ndarray) -> np.ndarray:
+            return np.searchsorted(self.keys, key)
+
         # Most query cells are empty: find the whole bucket first and look inside only non-empty ones.
         first, stop = search(base), search(base + self.group_count)
         busy = np.flatnonzero(stop > first)

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from meshing.mesh import TET_EDGES, TET_FACES
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, overload
 
 if TYPE_CHECKING:
     from volspring.collision.bodies import CollisionBodies
@@ -197,8 +197,16 @@ def _chunks(count):
     return [slice(start, min(start + _CHUNK, count)) for start in range(0, count, _CHUNK)] or [slice(0, 0)]
 
 
+@overload
+def tets_intersect(a: np.ndarray, b: np.ndarray, *, return_vertex_inside: Literal[False] = ...) -> np.ndarray: ...
+@overload
 def tets_intersect(a: np.ndarray, b: np.ndarray, *,
-                   return_vertex_inside: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                   return_vertex_inside: Literal[True]) -> tuple[np.ndarray, np.ndarray]: ...
+@overload
+def tets_intersect(a: np.ndarray, b: np.ndarray, *,
+                   return_vertex_inside: bool = ...) -> np.ndarray | tuple[np.ndarray, np.ndarray]: ...
+def tets_intersect(a: np.ndarray, b: np.ndarray, *,
+                   return_vertex_inside: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """Whether each pair of closed tets intersects (touching counts), by vertex-in-tet and edge-through-face.
 
     Parameters
@@ -436,7 +444,7 @@ def crossing_tet_pairs(bodies: CollisionBodies, positions: np.ndarray, *, cell_s
     lo, hi = corners.min(axis=1), corners.max(axis=1)
     candidate = np.ones(bodies.tet_count, dtype=bool)
     if boundary:  # a tet with a boundary face has boundary edges too
-        edged, faced = bodies.tet_edge_on_boundary.any(axis=1), bodies.tet_face_on_boundary.any(axis=1)
+        edged, faced = np.any(bodies.tet_edge_on_boundary, axis=1), np.any(bodies.tet_face_on_boundary, axis=1)
         candidate = edged
     if not self_collision:  # only tets in the box of another body can meet it
         body_lo = np.minimum.reduceat(x, bodies.node_offsets[:-1], axis=0)

@@ -190,7 +190,10 @@ class ThinContactForce(_PenaltyResponse):
             body_faces = np.flatnonzero(face_body == body)
             local, closest, weights, distance = nearest_surface_points(p[in_row[pick]], y, faces[body_faces])
             f = body_faces[local]
-            rows.append(in_row[pick]), face.append(f), bary.append(weights), depth.append(h + distance)
+            rows.append(in_row[pick])
+            face.append(f)
+            bary.append(weights)
+            depth.append(h + distance)
             direction.append(-_away(p[in_row[pick]], closest, distance, -normals[f]))
         # Outside within the thickness: hashed triangle boxes grown by h, the nearest per (node, body).
         corners = y[faces]
@@ -203,7 +206,10 @@ class ThinContactForce(_PenaltyResponse):
         row, f, closest, weights, distance, key = (a[close] for a in (row, f, closest, weights, distance, key))
         best = _nearest_per_key(key, distance)
         row, f, closest, weights, distance = (a[best] for a in (row, f, closest, weights, distance))
-        rows.append(row), face.append(f), bary.append(weights), depth.append(h - distance)
+        rows.append(row)
+        face.append(f)
+        bary.append(weights)
+        depth.append(h - distance)
         direction.append(_away(p[row], closest, distance, normals[f]))
 
         row, f, bary = np.concatenate(rows), np.concatenate(face), np.concatenate(bary)

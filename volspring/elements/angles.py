@@ -149,6 +149,10 @@ class AngleSprings(ElementSet):
 
     name = "angles"
 
+    if TYPE_CHECKING:  # what the constructor takes: numbers broadcast, arrays are checked and stored (__post_init__)
+        def __init__(self, node_count: int, triples: ArrayLike, stiffness: float | ArrayLike,
+                     rest_angles: float | ArrayLike) -> None: ...
+
     def __post_init__(self):
         node_count = int(self.node_count)
         _freeze_joints(self, "triples", _checked_triples(self.triples, node_count), (0.0, np.pi),
@@ -276,12 +280,16 @@ class _JointLinearization(Linearization):
     element_set : AngleSprings
     """
 
+    element_set: AngleSprings
+
     def __init__(self, forces, edge_blocks, stiffness_scale, element_set):
         self.forces, self.element_set, self.edge_blocks = forces, element_set, edge_blocks
         self.blocks = _node_blocks(*edge_blocks, scale=stiffness_scale)
 
+    # A cached_property is writable like the base's attribute (it lives in the instance __dict__); mypy takes it
+    # for a read-only property.
     @cached_property
-    def stiffness(self) -> np.ndarray:
+    def stiffness(self) -> np.ndarray:  # type: ignore[override]
         """(e, 9, 3, 3) float -- K_e alone [N/m]."""
         return _node_blocks(*self.edge_blocks)
 
@@ -466,6 +474,10 @@ class DihedralSprings(ElementSet):
     rest_angles: np.ndarray
 
     name = "dihedrals"
+
+    if TYPE_CHECKING:  # what the constructor takes: numbers broadcast, arrays are checked and stored (__post_init__)
+        def __init__(self, node_count: int, quads: ArrayLike, stiffness: float | ArrayLike,
+                     rest_angles: float | ArrayLike) -> None: ...
 
     def __post_init__(self):
         node_count = int(self.node_count)

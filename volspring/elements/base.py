@@ -125,6 +125,8 @@ class OperatorLinearization(Linearization):
         return self.scale * self._times(u)
 
     def preconditioner_blocks(self) -> np.ndarray:
+        if self._preconditioner is None:
+            raise ValueError("this linearization was built without a preconditioner (no stand-in blocks)")
         return self._preconditioner()
 
 

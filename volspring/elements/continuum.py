@@ -36,6 +36,7 @@ mass-proportional part is :class:`volspring.forces.Drag`.
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from functools import cached_property
 
 import numpy as np
@@ -93,6 +94,12 @@ class _TetContinuum(ElementSet):
     preconditioner from :meth:`preconditioner_blocks` on the tets' 1-ring)."""
 
     matrix_free = True
+    kinematics: TetGradients
+    stiffness_damping: float  # Rayleigh b [s]
+
+    @abstractmethod
+    def preconditioner_blocks(self, x: np.ndarray) -> np.ndarray:
+        """(T, 16, 3, 3) -- per tet, stand-in blocks of the stiffness at x to build a preconditioner from."""
 
     @property
     def preconditioner_stencil(self) -> np.ndarray:
@@ -402,7 +409,7 @@ class NodalStrain(_TetContinuum):
     def _state(self, x, project, *, volume=None):
         """Everything forces and blocks need at x: the volume kinematics when the set has a volume term (or
         ``volume`` asks for them), the smoothed rotation when it has shear."""
-        state = {}
+        state: dict[str, np.ndarray] = {}
         if self.bulk.any() if volume is None else volume:
             F = self.kinematics.deformation(x)
             cof = _cofactor(F)

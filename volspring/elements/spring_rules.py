@@ -52,8 +52,9 @@ FORCE_LAWS = ("hooke", "strain")
 
 
 def springs_from_topology(topology: SpringTopology, material: Material, *, rule: str, stiffness: float | None = None,
-                          law: str = "hooke", damping_ratio: float | None = None, damping: float | None = None,
-                          tet_moduli: np.ndarray | None = None, tet_densities: np.ndarray | None = None) -> tuple:
+                          law: str = "hooke", damping_ratio: float | None = None,
+                          damping: float | np.ndarray | None = None, tet_moduli: np.ndarray | None = None,
+                          tet_densities: np.ndarray | None = None) -> tuple:
     """Masses and springs of a (checked) topology and material by a stiffness rule.
 
     Parameters

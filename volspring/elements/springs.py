@@ -28,6 +28,10 @@ from volspring.elements.base import BlockMap, ElementSet, Linearization
 from volspring.errors import SpringCollapsed
 from volspring.material import _real_array, _shown
 from meshing.topology import SPRING_KINDS, vector_lengths
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["SpringLinearization", "Springs"]
 
@@ -74,6 +78,10 @@ class Springs(ElementSet):
     kinds: np.ndarray
 
     name = "springs"
+
+    if TYPE_CHECKING:  # what the constructor takes: numbers broadcast, arrays are checked and stored (__post_init__)
+        def __init__(self, node_count: int, pairs: ArrayLike, stiffness: ArrayLike, damping: ArrayLike,
+                     rest_lengths: ArrayLike, kinds: ArrayLike) -> None: ...
 
     def __post_init__(self):
         pairs = checked_pairs(self.pairs, int(self.node_count))
@@ -243,7 +251,10 @@ class SpringLinearization(Linearization):
         k_e (1 - l0/l), clamped if asked: coefficient of the transverse projector I - r r^T in H_e [N/m]
     """
 
-    def __init__(self, forces: np.ndarray, blocks: np.ndarray, stiffness: np.ndarray | None, element_set: ElementSet,
+    blocks: np.ndarray  # always assembled (never None, unlike a general Linearization's)
+    element_set: Springs
+
+    def __init__(self, forces: np.ndarray, blocks: np.ndarray, stiffness: np.ndarray | None, element_set: Springs,
                  directions: np.ndarray, lengths: np.ndarray, axial: np.ndarray, transverse: np.ndarray):
         super().__init__(forces, blocks, stiffness, element_set)
         self.directions, self.lengths, self.axial, self.transverse = directions, lengths, axial, transverse

@@ -53,7 +53,7 @@ class TetGradients:
     gradients: np.ndarray
 
     @classmethod
-    def at_rest(cls, rest_positions: np.ndarray, tets: np.ndarray, *, owner: str = "tets") -> "TetGradients":
+    def at_rest(cls, rest_positions: ArrayLike, tets: ArrayLike, *, owner: str = "tets") -> "TetGradients":
         """The gradients of ``tets`` at ``rest_positions``; a ValueError names the first tet that is not
         positively oriented with a non-zero volume (``owner`` names the array in the message)."""
         tets = np.asarray(tets, dtype=np.int64)

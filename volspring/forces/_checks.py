@@ -38,6 +38,8 @@ def masses_or_none(masses, *, allow_zero=False):
 class MassProportional:
     """Mixin of the fields f_i = m_i a_i: the masses given (0.1's form) or else the model's."""
 
+    masses: np.ndarray | None  # a field of every class that mixes this in
+
     def masses_of(self, model: Model) -> np.ndarray:
         """(n,) float -- the masses this field weighs with [kg]."""
         return model.masses if self.masses is None else self.masses

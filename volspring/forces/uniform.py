@@ -178,7 +178,7 @@ class Wind(MassProportional):
         else:
             mean = self.speed
         if len(self.gusts):
-            amplitude, frequency, phase = self.gusts.T
+            amplitude, frequency, phase = np.asarray(self.gusts).T  # (k, 3) since __post_init__
             mean += float(np.sum(amplitude * np.sin(2.0 * np.pi * frequency * t + phase)))
         return mean
 

@@ -46,7 +46,7 @@ INTEGRATORS = {
 _ALIASES = {"rk2": "midpoint", "position_verlet": "verlet", "backward_euler": "implicit_euler"}
 
 
-def integrator_class(name: str) -> type:
+def integrator_class(name: str) -> type[Integrator]:
     """The integrator class registered under ``name`` (case and ``-``/``_`` insensitive).
 
     Raises

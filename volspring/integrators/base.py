@@ -10,10 +10,15 @@ import numpy as np
 from volspring.errors import SimulationDiverged
 from volspring.material import _real_number
 from volspring.scene import Scene, State
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol, cast
 
 if TYPE_CHECKING:
     from volspring.integrators.cache import SolverCache
+
+    class _Implicit(Protocol):
+        """What an integrator that is not ``explicit`` offers: an advance that takes the scene's solver cache."""
+
+        def advance(self, scene: Scene, state: State, dt: float, cache: SolverCache | None = None) -> State: ...
 
 __all__ = ["Integrator"]
 
@@ -71,7 +76,7 @@ class Integrator(ABC):
             raise TypeError(f"scene must be a volspring Scene, got {type(scene).__name__}")
         scene.check_state(state, finite=False)
         new = self.advance(scene, state, dt) if cache is None or self.explicit else \
-            self.advance(scene, state, dt, cache=cache)
+            cast("_Implicit", self).advance(scene, state, dt, cache=cache)
         self.project(scene, state, new, dt)
         check_finite(new, dt)
         return new

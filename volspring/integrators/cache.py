@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from volspring.scene import Scene
+    from volspring.solvers.krylov import _LinearSolver
 
 __all__ = ["SolverCache"]
 
@@ -48,7 +49,7 @@ class SolverCache:
         with the hierarchy, not pickled)
     """
 
-    solver: object
+    solver: _LinearSolver
     pattern: BlockPattern | None = None
     record: tuple | None = None
     matrix_free: bool = False
@@ -59,9 +60,9 @@ class SolverCache:
         (and the hierarchy record dropped)."""
         cached = self.pattern
         if cached is None or cached.model is not scene.model or not np.array_equal(cached.free, scene.free):
-            self.pattern = BlockPattern(scene.model, scene.free, matrix_free=self.matrix_free)
+            cached = self.pattern = BlockPattern(scene.model, scene.free, matrix_free=self.matrix_free)
             self.record = self.stand_in = None
-        return self.pattern
+        return cached
 
     def built(self, pattern: BlockPattern, step: int, t: float, dt: float, x: np.ndarray, v: np.ndarray) -> None:
         """Note that the solver's hierarchy was just built from this state."""
@@ -78,5 +79,5 @@ class SolverCache:
     def __getstate__(self):
         solver = copy.copy(self.solver)
         if getattr(solver, "hierarchy", None) is not None:
-            solver.hierarchy = None
+            setattr(solver, "hierarchy", None)  # a solver with a hierarchy (AMG's): not pickled
         return {"solver": solver, "pattern": None, "record": None, "matrix_free": self.matrix_free, "stand_in": None}

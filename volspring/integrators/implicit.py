@@ -57,16 +57,17 @@ import scipy.sparse as sp
 from scipy.sparse.linalg import aslinearoperator
 
 from meshing.geometry import rigid_body_modes
-from volspring.assembly import BlockPattern, eliminate_held, held_unknowns
+from volspring.assembly import BlockPattern, ModelLinearization, eliminate_held, held_unknowns
 from volspring.integrators.base import Integrator
 from volspring.integrators.cache import SolverCache
 from volspring.scene import Scene, State
 from volspring.solvers import LINEAR_SOLVERS, SolveInfo, make_linear_solver
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from scipy import sparse
+    from scipy.sparse.linalg import LinearOperator
     from volspring.solvers.krylov import _LinearSolver
 
 __all__ = ["ImplicitEuler", "ImplicitStepInfo", "SolverCache"]
@@ -120,15 +121,15 @@ class _System:
 
     matrix: sp.bsr_matrix
     extra: sp.csr_matrix | None
-    springs: object  # ModelLinearization: every element set's forces and blocks h^2 K + h C
+    springs: ModelLinearization  # every element set's forces and blocks h^2 K + h C
     forces: np.ndarray  # (n, 3) all forces at (x, v, t) [N]
     assembly_seconds: float
     extra_full: sp.csr_matrix | None  # -h dF/dv - h^2 dF/dx of scene forces, all unknowns
     extra_dfdx: sp.csr_matrix | None  # dF/dx of scene forces, all unknowns
     held: np.ndarray | None = None  # (3f,) bool held unknowns of partly held nodes, eliminated
     held_rhs: np.ndarray | None = None  # (3f,) what the held values put into the right-hand side (0 on held rows)
-    operator: object = None  # LinearOperator of the sets applied as products (held unknowns masked), or None
-    preconditioner_matrix: object = None  # callable -> the matrix with their stand-in blocks, or None
+    operator: LinearOperator | None = None  # the sets applied as products (held unknowns masked), or None
+    preconditioner_matrix: Callable[[], sp.bsr_matrix] | None = None  # () -> the matrix with their stand-in blocks
 
     def with_held(self, b) -> np.ndarray:
         """The right-hand side ``b`` with the held unknowns' rows set (see :func:`eliminate_held`)."""
@@ -226,7 +227,7 @@ class ImplicitEuler(Integrator):
             raise ValueError(f"rebuild_growth = {rebuild_growth!r} is not > 1")
         if rebuild_every is not None and int(rebuild_every) < 1:
             raise ValueError(f"rebuild_every = {rebuild_every!r} is not >= 1")
-        options = {"on_failure": on_failure}
+        options: dict[str, Any] = {"on_failure": on_failure}
         if solver != "direct":
             options.update(rtol=rtol, maxiter=maxiter)
         if solver == "amg":
@@ -239,7 +240,7 @@ class ImplicitEuler(Integrator):
         self.rebuild_every = None if rebuild_every is None else int(rebuild_every)
         self.clamp_compression = bool(clamp_compression)
         self.matrix_free = bool(matrix_free) and solver == "amg" and self.clamp_compression
-        self.last_solve = None
+        self.last_solve: ImplicitStepInfo | None = None
         self.cache = self.new_cache()
 
     def new_cache(self) -> SolverCache:

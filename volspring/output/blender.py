@@ -49,7 +49,7 @@ import numpy as np
 from meshing._io import atomic_path
 from volspring.output.blender_import import blender_frame_rate, import_script_path, write_import_script
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 if TYPE_CHECKING:
     from meshing.anchoring import Anchor
@@ -223,7 +223,7 @@ class BlenderWriter:
                  first_frame: int = 0, record: Callable[..., Any] | None = None, frame_dt: float | None = None):
         if not hasattr(surface, "deform"):
             surface = BoundarySurface.from_mesh(surface)
-        self.surface = surface
+        self.surface = cast("Anchor | BoundarySurface", surface)  # what has deform(x)
         self.directory = Path(directory)
         self.name = str(name)
         if not self.name or "/" in self.name or "\\" in self.name:
@@ -242,7 +242,7 @@ class BlenderWriter:
             if not np.isfinite(value):
                 raise ValueError(f"{label} = {value} is not finite")
         self.start_frame, self.sample_rate = float(start_frame), float(sample_rate)
-        self.frame_dt = None
+        self.frame_dt: float | None = None
         if frame_dt is not None:
             if not (self.obj and self.pc2):
                 raise ValueError(f"frame_dt = {frame_dt!r} s is for the import script, which needs both the OBJ "
@@ -254,7 +254,7 @@ class BlenderWriter:
         self.frame_count = int(first_frame)
         if self.frame_count < 0:
             raise ValueError(f"first_frame = {first_frame} is not >= 0")
-        self._point_count = None
+        self._point_count: int | None = None
         self._record = record
         if self.pc2 and self.frame_count:
             self._announce(self.pc2_path)
@@ -329,7 +329,7 @@ class BlenderWriter:
                                + vertices + self._faces_text)
         if self.pc2:
             self._append_pc2(points)
-        if self._script_due:  # after the frame's files, so that the script never names a missing one
+        if self._script_due and self.frame_dt is not None:  # after the frame's files: it names them all
             write_import_script(self.directory, name=self.name, frame_dt=self.frame_dt)
             self._script_due = False
         self.frame_count += 1

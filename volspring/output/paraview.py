@@ -119,10 +119,16 @@ def read_pvd(path: str | os.PathLike[str]) -> list:
         root = ET.parse(path).getroot()
     except ET.ParseError as error:
         raise ValueError(f"{path} is not valid XML: {error}") from error
-    if root.tag != "VTKFile" or root.get("type") != "Collection" or root.find("Collection") is None:
+    collection = root.find("Collection")
+    if root.tag != "VTKFile" or root.get("type") != "Collection" or collection is None:
         raise ValueError(f"{path} is not a VTK collection (expected <VTKFile type=\"Collection\">)")
-    return [(float(item.get("timestep")), path.parent / item.get("file"))
-            for item in root.find("Collection").iter("DataSet")]
+    datasets = []
+    for item in collection.iter("DataSet"):
+        timestep, file = item.get("timestep"), item.get("file")
+        if timestep is None or file is None:
+            raise ValueError(f"{path} has a DataSet without its timestep or file attribute")
+        datasets.append((float(timestep), path.parent / file))
+    return datasets
 
 
 def _frame_time(t, steps) -> float:
@@ -269,7 +275,7 @@ class ParaViewWriter:
             self._kind_names = {f"kind={SPRING_KINDS[code]}": int(code) for code in np.unique(model.kinds)}
         self._record = record
         self.directory.mkdir(parents=True, exist_ok=True)
-        self._entries = {"body": [], "springs": [], "surface": []}
+        self._entries: dict[str, list[tuple[float, str]]] = {"body": [], "springs": [], "surface": []}
         first_frame = int(first_frame)
         if first_frame < 0:
             raise ValueError(f"first_frame = {first_frame} is not >= 0")
@@ -356,7 +362,7 @@ class ParaViewWriter:
                              f"previous frame's t = {self.times[-1]!r} s")
         displacement = x - self.model.rest_positions
         self._announce(*self.frame_paths())
-        files = {}
+        files: dict[str, Path] = {}
         try:
             self._write_frame(x, v, displacement, time, files)
         except BaseException:

@@ -88,7 +88,8 @@ def _inside(folder: Path, relative: str):
 
 def _remove_listed(folder: Path, files) -> list:
     """Remove the listed files that exist, then the folders they leave empty; return the files removed."""
-    removed, parents = [], set()
+    removed: list[str] = []
+    parents: set[Path] = set()
     for file in files:
         target = _inside(folder, file)
         if target is None:

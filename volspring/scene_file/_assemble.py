@@ -21,6 +21,13 @@ import numpy as np
 
 from volspring.scene_file._schema import SceneFileError, joined
 import os
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from volspring.comparisons import StaticProblem
+    from volspring.integrators.base import Integrator
+    from volspring.model import Model
+    from volspring.scene import Scene, State
 
 __all__ = ["AssembledScene", "assemble_scene", "at"]
 
@@ -51,13 +58,13 @@ class AssembledScene:
 
     bodies: tuple
     origins: tuple
-    model: object
-    scene: object
-    state: object
-    integrator: object
-    triangles: object = None
+    model: Model
+    scene: Scene
+    state: State
+    integrator: Integrator
+    triangles: np.ndarray | None = None
     render_surface: object = None
-    comparison: object = None
+    comparison: StaticProblem | None = None
 
 
 @contextmanager
@@ -128,14 +135,16 @@ def assemble_scene(scene: dict, *, base: str | os.PathLike[str] = ".") -> Assemb
                                rotation=_rotation(spec.get("rotation")), velocity=spec.get("velocity", (0, 0, 0)),
                                angular_velocity=spec.get("angular_velocity", (0, 0, 0)), name=spec.get("name", "")))
         origins.append(origin)
-    model = _model(Model, bodies) if bodies else None
-    velocities = [initial_velocities(bodies, model)] if bodies else []
-    if len(tets) == len(specs):
-        structures = None
-    else:
-        structures = _Structures(specs, len(tets), model, Path(base))
+    tet_model = _model(Model, bodies) if bodies else None
+    velocities = [] if tet_model is None else [initial_velocities(bodies, tet_model)]
+    structures = None if len(tets) == len(specs) else _Structures(specs, len(tets), tet_model, Path(base))
+    if structures is not None:
         model = structures.model
         origins += [part.origin for part in structures.parts]
+    elif tet_model is not None:
+        model = tet_model
+    else:
+        raise SceneFileError("bodies = [] holds no body; expected at least one [[bodies]] table")
 
     pins, supports = _supports(scene["supports"], model)
     obstacles = []
@@ -167,7 +176,7 @@ def assemble_scene(scene: dict, *, base: str | os.PathLike[str] = ".") -> Assemb
         comparison = static_problem(scene, tuple(bodies), built)
     if structures is None:
         with at("bodies"):
-            state = built.initial_state(v=initial_velocities(bodies, model))
+            state = built.initial_state(v=velocities[0])
         return AssembledScene(tuple(bodies), tuple(origins), model, built, state, integrator,
                               comparison=comparison)
     x = np.concatenate([model.rest_positions[:structures.offsets[0]]] + [part.x for part in structures.parts])
@@ -220,7 +229,7 @@ class _Structures:
         from volspring.output import BoundarySurface
         from volspring.scene_file._structures import JoinedSurface
 
-        found = []
+        found: list[tuple[object, int, int]] = []  # (surface, first node, end node)
         if self.tet_model is not None:
             found.append((BoundarySurface.from_mesh(self.tet_model), 0, self.tet_model.node_count))
         found += [(part.surface, int(start), int(start) + part.model.node_count)
@@ -312,7 +321,8 @@ def _supports(specs, model):
     """``(pins, supports)``: pins at rest (all of them, one Pins, as ``--pin``) and the others."""
     from volspring.supports import Pins, Prescribed, Sliding
 
-    held, supports = np.zeros(model.node_count, dtype=bool), []
+    held = np.zeros(model.node_count, dtype=bool)
+    supports: list[Pins | Sliding | Prescribed] = []
     for index, spec in enumerate(specs):
         path = joined("supports", index)
         nodes = _support_nodes(spec, path, model)

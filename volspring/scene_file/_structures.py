@@ -18,11 +18,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from volspring.scene_file._assemble import _rotation, at
 from volspring.scene_file._schema import SceneFileError
+
+if TYPE_CHECKING:
+    from volspring.model import Model
 
 __all__ = ["JoinedSurface", "Part", "build_part", "part_extras"]
 
@@ -48,7 +52,7 @@ class Part:
         lattice's anchored surface; None for strings and hair.
     """
 
-    model: object
+    model: Model
     origin: str
     x: np.ndarray
     v: np.ndarray
@@ -158,6 +162,8 @@ def _triangle_file(spec, path, base):
     except Exception as error:  # trimesh raises a variety of errors for unreadable files
         raise SceneFileError(f"{path}.mesh = {spec['mesh']!r}: cannot read {file} as a triangle surface: "
                              f"{error}") from error
+    if not isinstance(surface, trimesh.Trimesh) or len(surface.faces) == 0:
+        raise SceneFileError(f"{path}.mesh = {spec['mesh']!r}: {file} holds no triangles")
     factor = length_factor(spec["units"], spec.get("scale"))
     return np.asarray(surface.vertices, dtype=np.float64) * factor, np.asarray(surface.faces), str(file)
 
@@ -234,6 +240,8 @@ def part_extras(spec: dict, path: str, part: Part, model, body: int, offset: int
     if "self_contact" in spec:
         from volspring.collision import ClothSelfContactForce
 
+        if part.triangles is None:  # the key table allows self_contact on cloths only, which have triangles
+            raise SceneFileError(f"{path}.self_contact applies to a cloth (kind = \"cloth\"), which has triangles")
         with at(f"{path}.self_contact"):
             forces.append(ClothSelfContactForce(model, part.triangles + offset, **spec["self_contact"]))
     return constraints, forces

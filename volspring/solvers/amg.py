@@ -168,9 +168,9 @@ class AMGConjugateGradient(_LinearSolver):
         self.smoother, self.max_coarse = smoother, int(max_coarse)
         self.strength_theta = float(strength_theta)
         self.build_count = 0
-        self._source = None      # _Source: what the hierarchy is built from (pickled)
-        self._hierarchy = None   # pyamg MultilevelSolver (not pickled)
-        self._cycle = None       # r -> z, one V-cycle of it (not pickled)
+        self._source: _Source | None = None  # what the hierarchy is built from (pickled)
+        self._hierarchy: Any = None  # pyamg MultilevelSolver (not pickled)
+        self._cycle: Callable[[np.ndarray], np.ndarray] | None = None  # r -> z, one V-cycle of it (not pickled)
 
     @property
     def hierarchy(self) -> Any:
@@ -222,6 +222,8 @@ class AMGConjugateGradient(_LinearSolver):
         import pyamg
 
         source = self._source
+        if source is None:
+            raise ValueError("the AMG hierarchy has no source: call build(matrix, near_null_space) first")
         matrix = source.matrix
         if source.prolongation is not None:
             matrix = (source.prolongation.T @ matrix @ source.prolongation).tocsr()
@@ -279,10 +281,10 @@ class AMGConjugateGradient(_LinearSolver):
         matrix : (N, N) sparse
             the current system, same shape as the built one (made BSR, block size 3)
         """
-        hierarchy = self.hierarchy
-        if hierarchy is None:
+        hierarchy, source = self.hierarchy, self._source
+        if hierarchy is None or source is None:
             raise ValueError("the AMG hierarchy is not built: call build(matrix, near_null_space) first")
-        if self._source.prolongation is not None:
+        if source.prolongation is not None:
             raise ValueError("refresh() applies to a hierarchy built on the matrix itself, not a two-level one")
         if matrix.shape != hierarchy.levels[0].A.shape:
             raise ValueError(f"matrix has shape {matrix.shape}; the hierarchy was built for {hierarchy.levels[0].A.shape}")
@@ -305,15 +307,16 @@ class AMGConjugateGradient(_LinearSolver):
             if self._source is None:
                 raise ValueError("the AMG hierarchy is not built: call build(matrix, near_null_space) first")
             self._construct()  # after unpickling: the same hierarchy again
-        source = self._source
+        source, cycle = self._source, self._cycle
+        assert source is not None and cycle is not None  # both set by _construct()
         if source.prolongation is None:
-            return self._cycle(r)
+            return cycle(r)
         from pyamg.relaxation.relaxation import gauss_seidel
 
         matrix, prolongation = source.matrix, source.prolongation
         z = np.zeros_like(r)
         gauss_seidel(matrix, z, r, iterations=1, sweep="forward")
-        z += prolongation @ self._cycle(prolongation.T @ (r - matrix @ z))
+        z += prolongation @ cycle(prolongation.T @ (r - matrix @ z))
         gauss_seidel(matrix, z, r, iterations=1, sweep="backward")
         return z
 
