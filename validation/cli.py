@@ -95,6 +95,12 @@ def _parser():
     parser.add_argument("--density", type=float, default=1000.0, help="density of --mesh [kg/m^3] (default 1000)")
     parser.add_argument("--gravity", default="0,0,-9.81", metavar="GX,GY,GZ",
                         help="gravity on --mesh [m/s^2] (default 0,0,-9.81)")
+    parser.add_argument("--workers", type=int, metavar="N",
+                        help="run the cases and studies at the same time on a local cluster of N worker processes "
+                             "(as volspring sweep; default: one after the other in this process, which keeps the "
+                             "speed study's wall times clean)")
+    parser.add_argument("--scheduler", metavar="ADDRESS",
+                        help="run the cases and studies on the Dask cluster of this scheduler (tcp://HOST:8786)")
     parser.add_argument("--sweep", action="append", default=[], metavar="DIR",
                         help="a volspring sweep's --out folder: its runs' error against FEM over their cost, in a "
                              "section after the ladder (repeatable; alone, no case is run)")
@@ -168,6 +174,10 @@ def _check(args):
         raise _BadInput("--units and --scale apply to --mesh FILE, which is missing")
     if args.scale is not None and not (np.isfinite(args.scale) and args.scale > 0):
         raise _BadInput(f"--scale {args.scale:g} is not a finite number > 0")
+    if args.workers is not None and args.workers < 1:
+        raise _BadInput(f"--workers {args.workers} is not >= 1")
+    if args.workers is not None and args.scheduler is not None:
+        raise _BadInput("--workers sets a local cluster; --scheduler runs on an existing one: give one of them")
     _check_folders(args)
 
 
@@ -180,6 +190,19 @@ def _parse_rules(text) -> tuple:
     if unknown:
         raise _BadInput(f"--rule {text!r}: unknown rule {unknown[0]!r}; known: {', '.join(RULES)} (comma-separated)")
     return tuple(rule for rule in RULES if rule in names)
+
+
+@contextlib.contextmanager
+def _client(args):
+    """A Dask client for ``--workers N`` or ``--scheduler ADDRESS`` (:func:`volspring.sweep.sweep_client`), or
+    None: the cases and studies run in this process."""
+    if args.workers is None and args.scheduler is None:
+        yield None
+        return
+    from volspring.sweep import sweep_client
+
+    with sweep_client(workers=args.workers, scheduler=args.scheduler) as client:
+        yield client
 
 
 def _check_folders(args) -> None:
@@ -245,9 +268,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             start = time.perf_counter()
             with run:
                 try:
-                    validate(args.out, cases=args.cases, quick=args.quick, own_case=own, models=args.models,
-                             rules=args.rules, folder=args.cache, progress=progress, command=command,
-                             record=run.record, sweeps=sweeps)
+                    with _client(args) as client:
+                        validate(args.out, cases=args.cases, quick=args.quick, own_case=own, models=args.models,
+                                 rules=args.rules, folder=args.cache, progress=progress, command=command,
+                                 record=run.record, sweeps=sweeps, client=client)
                 except (ValueError, ArithmeticError, RuntimeError, OSError) as error:
                     run.finish("failed")
                     bar.close()

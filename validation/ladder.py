@@ -61,8 +61,7 @@ if TYPE_CHECKING:
     from validation.compare import Comparison
 
 __all__ = ["FRAME_STEP_S", "FREQUENCY_COUNT", "LADDER_NUS", "STATIC_REFERENCE", "STEP_COUNT", "WARMUP_STEPS",
-           "case_rows",
-           "parse_models", "rung_constants", "run_ladder", "step_costs"]
+           "case_rows", "compare_rungs", "parse_models", "rung_constants", "run_ladder", "step_costs"]
 
 logger = logging.getLogger(__name__)
 
@@ -260,6 +259,16 @@ def case_rows(comparison: Comparison, costs: dict) -> list:
     return rows
 
 
+def compare_rungs(case: Case, *, models: Sequence[str] = VALIDATED_MODELS,
+                  folder: str | os.PathLike[str] | None = None, progress: Callable[..., Any] | None = None
+                  ) -> Comparison:
+    """The rungs (no spring rules, no P1) on ``case`` against its reference: :data:`STATIC_REFERENCE` for a static
+    case (Taylor-Hood, P2 beside it), P2 modes for a modal one; what :func:`run_ladder` does with its ``cases``."""
+    if case.kind == "modes":
+        return compare_modes(case, rules=(), models=models, folder=folder, progress=progress)
+    return compare_static(case, rules=(), models=models, folder=folder, progress=progress, elements=STATIC_REFERENCE)
+
+
 def run_ladder(cases: Sequence[Case] = (), *, comparisons: Sequence[Comparison] = (),
                models: Sequence[str] = VALIDATED_MODELS, folder: str | os.PathLike[str] | None = None, cells: int = 4,
                dt: float = FRAME_STEP_S, steps: int = STEP_COUNT, progress: Callable[..., Any] | None = None) -> dict:
@@ -301,11 +310,8 @@ def run_ladder(cases: Sequence[Case] = (), *, comparisons: Sequence[Comparison] 
     """
     note = progress or (lambda message: None)
     models = parse_models(models)
-    comparisons = list(comparisons)
-    for case in cases:
-        compare = compare_modes if case.kind == "modes" else compare_static
-        options: dict[str, Any] = {} if case.kind == "modes" else {"elements": STATIC_REFERENCE}
-        comparisons.append(compare(case, rules=(), models=models, folder=folder, progress=note, **options))
+    comparisons = list(comparisons) + [compare_rungs(case, models=models, folder=folder, progress=note)
+                                       for case in cases]
     rows = []
     for comparison in comparisons:
         note(f"{comparison.case.name}: cost per step of each rung")

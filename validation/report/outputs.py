@@ -39,14 +39,15 @@ __all__ = ["read_results", "validate", "write_outputs"]
 def validate(out: str | os.PathLike[str], *, cases: Sequence[str] | None = None, quick: bool = False,
              own_case: Case | None = None, rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
              folder: str | os.PathLike[str] | None = None, progress: Any = None, command: Sequence[str] | None = None,
-             record: Callable[..., Any] | None = None, sweeps: Sequence[dict] = ()) -> dict:
+             record: Callable[..., Any] | None = None, sweeps: Sequence[dict] = (), client: Any = None) -> dict:
     """:func:`~validation.report.runner.run_validation` then :func:`write_outputs` into ``out``; returns the results.
 
-    ``record`` is passed on to :func:`write_outputs`; ``sweeps`` (:func:`validation.report.trade.read_sweep`) to
-    :func:`~validation.report.runner.run_validation`.
+    ``record`` is passed on to :func:`write_outputs`; ``sweeps`` (:func:`validation.report.trade.read_sweep`) and
+    ``client`` (a Dask client, :func:`volspring.sweep.sweep_client`) to :func:`~validation.report.runner.run_validation`.
     """
     results, artefacts = runner.run_validation(cases=cases, quick=quick, own_case=own_case, rules=rules,
-                                               models=models, folder=folder, progress=progress, sweeps=sweeps)
+                                               models=models, folder=folder, progress=progress, sweeps=sweeps,
+                                               client=client)
     results["command"] = command
     write_outputs(out, results, artefacts, record=record)
     return results

@@ -49,12 +49,15 @@ from validation.cases import build_case, uniaxial_compression
 from validation.compare import RULES, compare_modes, compare_static
 from validation.heldout import HELDOUT_CASE_NAMES
 from validation.springs import VALIDATED_MODELS
+from volspring.sweep import run_calls
 from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 from collections.abc import Sequence
 import os
 
 if TYPE_CHECKING:
+    from distributed import Client
+
     from validation._case import Case
 
 __all__ = ["BUILT_IN", "HELDOUT", "NOTES", "SCHEMA", "STATIC_CASES", "STUDIES", "SWEEP_NUS", "SWEEP_STRAINS", "UNITS",
@@ -131,7 +134,7 @@ def _settings(quick: bool) -> dict:
 def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, own_case: Case | None = None,
                    rules: Sequence[str] = RULES, models: Sequence[str] = VALIDATED_MODELS,
                    folder: str | os.PathLike[str] | None = None, progress: Callable[..., Any] | None = None,
-                   sweeps: Sequence[dict] = ()) -> tuple:
+                   sweeps: Sequence[dict] = (), client: Client | None = None) -> tuple:
     """Run cases, the ladder and studies.
 
     Parameters
@@ -154,6 +157,11 @@ def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, o
     sweeps : sequence of dict
         a user's sweeps, read by :func:`validation.report.trade.read_sweep`: shown after the ladder; with sweeps
         and no ``cases`` nor ``own_case``, no case is run
+    client : distributed.Client, optional
+        run the cases and studies as tasks on this Dask cluster (:func:`volspring.sweep.sweep_client`), at the same
+        time; None runs them here, one after the other. The results are the same but for the wall times of the
+        speed study, measured while other tasks share the machine; the ladder's step costs are timed here, after
+        the tasks, either way
 
     Returns
     -------
@@ -188,44 +196,69 @@ def run_validation(*, cases: Sequence[str] | None = None, quick: bool = False, o
         "settings": {key: value for key, value in settings.items() if key != "speed_steps"},
         "cases": {}, "studies": {}, "sweeps": list(sweeps)}
     results["settings"]["speed_steps"] = {key: list(value) for key, value in settings["speed_steps"].items()}
+    # Every case and study is independent: run here one after the other, or as tasks on a Dask cluster (progress
+    # then moves as each finishes). The ladder's costs are timed afterwards, here, on their own.
+    options = {"quick": quick, "own_case": own_case, "rules": rules, "models": models, "folder": folder,
+               "settings": settings, "progress": note if client is None else None}
+    calls = {name: (_run_task, (name,), options) for name in tasks}
+
+    def finished(name, output, count, total_count):
+        nonlocal done
+        done += weights[name]
+        if client is not None:  # run here, each task says what it is doing as it goes
+            note(f"{name} done ({count} of {total_count})")
+
+    if client is not None:
+        note(f"{len(calls)} cases and studies on the cluster")
+    outputs = run_calls(calls, client=client, on_result=finished)
     artefacts = {}
-    on_ladder, held_out = [], []  # comparisons made here with the rungs; held-out cases the ladder compares
-    for name in tasks:
-        note(name)
-        if name in STATIC_CASES or name == "own_mesh":
-            case = own_case if name == "own_mesh" and own_case is not None else build_case(name, quick=quick)
-            comparison = compare_static(case, rules=rules, models=models, folder=folder, progress=note)
-            results["cases"][name] = comparison.results
-            artefacts[name] = comparison
-            on_ladder.append(comparison)
-            if name == "uniaxial_compression":
-                results["cases"][name]["sweep"] = _compression_sweep(quick, rules, folder, note)
-        elif name == "cantilever_modes":
-            comparison = compare_modes(build_case(name, quick=quick), rules=rules, models=models, folder=folder,
-                                       progress=note)
-            results["cases"][name] = comparison.results
-            artefacts[name] = comparison
-            on_ladder.append(comparison)
-        elif name in HELDOUT:
-            held_out.append(build_case(name))
-        elif name == "refinement":
-            results["studies"]["refinement"] = studies.refinement_study(
-                settings["refinement_levels"], reference_level=settings["reference_level"], rules=rules,
-                folder=folder, progress=note)
-        elif name == "speed":
-            results["studies"]["speed"] = studies.speed_study(
-                per_height=settings["speed_per_height"], steps=settings["speed_steps"],
-                periods=settings["speed_periods"], residual_amplitude=settings["speed_residual_amplitude"],
-                folder=folder, progress=note)
-        elif name == "cauchy":
-            results["studies"]["cauchy"] = studies.cauchy_study(cells=settings["cauchy_cells"], rules=rules)
-        if name not in HELDOUT:
-            done += weights[name]
-    results["ladder"] = ladder.run_ladder(held_out, comparisons=on_ladder, models=models, folder=folder,
+    on_ladder, held_out = [], []  # comparisons made with the rungs: the report's cases, then the held-out shapes
+    for name, output in outputs.items():
+        if "case" in output:
+            results["cases"][name] = output["case"]
+            artefacts[name] = output["comparison"]
+            on_ladder.append(output["comparison"])
+        elif "held_out" in output:
+            held_out.append(output["held_out"])
+        else:
+            results["studies"][name] = output["study"]
+    results["ladder"] = ladder.run_ladder(comparisons=on_ladder + held_out, models=models, folder=folder,
                                           cells=settings["cauchy_cells"], progress=note)
     results["headline"] = _headline(results, rules)
     report(1.0, "done")
     return results, artefacts
+
+
+def _run_task(name: str, *, quick: bool, own_case: Case | None, rules: Sequence[str], models: Sequence[str],
+              folder: str | os.PathLike[str] | None, settings: dict,
+              progress: Callable[..., Any] | None = None) -> dict:
+    """One case or study of the report (a task of :func:`run_validation`): ``{"case": results, "comparison":
+    Comparison}`` for a case of the report, ``{"held_out": Comparison}`` (the rungs only, for the ladder) for a
+    held-out shape, ``{"study": results}`` for a study."""
+    note = progress or (lambda message: None)
+    note(name)
+    if name in STATIC_CASES or name == "own_mesh":
+        case = own_case if name == "own_mesh" and own_case is not None else build_case(name, quick=quick)
+        comparison = compare_static(case, rules=rules, models=models, folder=folder, progress=note)
+        if name == "uniaxial_compression":
+            comparison.results["sweep"] = _compression_sweep(quick, rules, folder, note)
+        return {"case": comparison.results, "comparison": comparison}
+    if name == "cantilever_modes":
+        comparison = compare_modes(build_case(name, quick=quick), rules=rules, models=models, folder=folder,
+                                   progress=note)
+        return {"case": comparison.results, "comparison": comparison}
+    if name in HELDOUT:
+        return {"held_out": ladder.compare_rungs(build_case(name), models=models, folder=folder, progress=note)}
+    if name == "refinement":
+        return {"study": studies.refinement_study(settings["refinement_levels"],
+                                                  reference_level=settings["reference_level"], rules=rules,
+                                                  folder=folder, progress=note)}
+    if name == "speed":
+        return {"study": studies.speed_study(per_height=settings["speed_per_height"], steps=settings["speed_steps"],
+                                             periods=settings["speed_periods"],
+                                             residual_amplitude=settings["speed_residual_amplitude"], folder=folder,
+                                             progress=note)}
+    return {"study": studies.cauchy_study(cells=settings["cauchy_cells"], rules=rules)}
 
 
 def _compression_sweep(quick, rules, folder, note) -> dict:

@@ -1,0 +1,51 @@
+"""The validation report's cases and studies on a Dask cluster: the same results as one after the other.
+
+``volspring validate --workers N`` sends every case and study to a local cluster as one task each
+(:func:`volspring.sweep.run_calls`, the path sweeps take); the ladder's step costs are timed afterwards in the
+calling process. Checked: the results equal the serial run's, every number but the wall times bit for bit, and
+the command refuses a cluster it cannot make.
+"""
+
+import pytest
+
+from validation.cli import main as validate_main
+from validation.report.runner import run_validation
+from volspring.sweep import sweep_client
+
+# A case of each kind (static, modal, held-out shape) and a study, on coarse meshes: about 5 s serially.
+CASES = ["cantilever_gravity", "cantilever_modes", "cauchy", "torus_gravity"]
+
+
+def without_times(value):
+    """``value`` with every wall time and cost left out (keys holding "seconds" or "cost"), and the run's date."""
+    if isinstance(value, dict):
+        return {key: without_times(item) for key, item in value.items()
+                if "seconds" not in key and "cost" not in key and key not in ("created", "command")}
+    if isinstance(value, list):
+        return [without_times(item) for item in value]
+    return value
+
+
+def test_the_cluster_gives_the_serial_results(tmp_path):
+    from validation.heldout import HELDOUT_CASE_NAMES
+
+    assert "torus_gravity" in HELDOUT_CASE_NAMES
+    serial, serial_artefacts = run_validation(cases=CASES, quick=True, folder=tmp_path / "fem")
+    with sweep_client(workers=2) as client:
+        clustered, clustered_artefacts = run_validation(cases=CASES, quick=True, folder=tmp_path / "fem",
+                                                        client=client)
+    assert without_times(clustered) == without_times(serial)
+    assert list(clustered_artefacts) == list(serial_artefacts) == ["cantilever_gravity", "cantilever_modes"]
+    rows = [(row["case"], row["rung"]) for row in clustered["ladder"]["rows"]]
+    assert rows == [(row["case"], row["rung"]) for row in serial["ladder"]["rows"]]  # the held-out shape last
+    assert rows[-1][0] == "torus_gravity"
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--workers", "0"], "--workers 0 is not >= 1"),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "give one of them"),
+])
+def test_a_cluster_that_cannot_be_made_is_refused_before_any_work(tmp_path, capsys, extra, message):
+    assert validate_main(["cauchy", "--quick", "--out", str(tmp_path / "report"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1, err
