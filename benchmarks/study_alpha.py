@@ -14,7 +14,9 @@ Run::
 
     OMP_NUM_THREADS=1 python benchmarks/study_alpha.py --alpha 0.55 0.6 0.65 0.7 --nu 0.25 0.3 0.45 0.49 0.499
 
-This is a study script, not a test (about 2 minutes).
+This is a study script, not a test (about 2 minutes). ``--workers N`` runs the shapes and Poisson ratios at the same
+time on a local Dask cluster, through the path sweeps take (:func:`volspring.sweep.run_calls`); the lines are the
+same.
 """
 
 from __future__ import annotations
@@ -25,42 +27,59 @@ import numpy as np
 
 
 def main():
-    from validation.fem import solve_fem_static
-    from validation.heldout import HELDOUT_CASE_NAMES, build_heldout_case
-    from validation.springs import spring_static
-    from volspring import Model
-    from volspring.elements.tet_kinematics import TetGradients
+    from validation.heldout import HELDOUT_CASE_NAMES
+    from volspring.sweep import run_calls, sweep_client
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--alpha", type=float, nargs="+", default=[0.6, 0.65, 0.7])
     parser.add_argument("--nu", type=float, nargs="+", default=[0.3, 0.49])
     parser.add_argument("--reference", choices=("TH", "P2"), default="TH")
+    parser.add_argument("--workers", type=int, default=0,
+                        help="shapes x nu at the same time on a local Dask cluster of N processes, as volspring "
+                             "sweep runs its runs (default 0: one after the other here)")
     args = parser.parse_args()
-    for name in HELDOUT_CASE_NAMES:
-        for nu in args.nu:
-            case = build_heldout_case(name, nu=nu)
-            fem = {element: solve_fem_static(case.mesh, case.material_tuple, element=element, **case.fem_arguments())
-                   for element in ("TH", "P2", "P1")}
-            best = fem[args.reference]
-            k = int(np.argmax(np.linalg.norm(best.displacement, axis=1)))
-            direction = best.displacement[k] / np.linalg.norm(best.displacement[k])
-            reference = best.displacement[k] @ direction
-            kinematics = TetGradients.at_rest(case.mesh.points, case.mesh.tets)
-            line = f"{name:18s} nu {nu:5.3f} nodes {case.mesh.node_count:4d}" + "".join(
-                f" {element} {fem[element].displacement[k] @ direction / reference:.3f}"
-                for element in ("TH", "P2", "P1") if element != args.reference)
-            rungs = [("springs", None), ("springs+volume", None)] + [("smoothed", a) for a in args.alpha]
-            for rung, alpha in rungs:
-                try:
-                    model = Model.from_mesh(case.mesh, case.material, model=rung, alpha=alpha)
-                except ValueError:
-                    line += f" | {rung} refused"
-                    continue
-                u = spring_static(case, model).displacement
-                volume = float(kinematics.volumes @ np.trace(kinematics.deformation(u), axis1=1, axis2=2))
-                label = rung if alpha is None else f"a={alpha:g}"
-                line += f" | {label} {u[k] @ direction / reference:.3f} dV {volume / best.volume_change:.3g}"
-            print(line, flush=True)
+    calls = {f"{name}-{nu:g}": (study_line, (name, nu, tuple(args.alpha), args.reference), {})
+             for name in HELDOUT_CASE_NAMES for nu in args.nu}
+    if args.workers:
+        with sweep_client(workers=args.workers) as client:
+            lines = run_calls(calls, client=client)
+    else:  # printed as each is done
+        lines = run_calls(calls, on_result=lambda key, line, done, total: print(line, flush=True))
+    if args.workers:
+        print("\n".join(lines.values()), flush=True)
+
+
+def study_line(name: str, nu: float, alphas: tuple, reference_element: str) -> str:
+    """One line of the study: a held-out shape at one nu, every element and rung as a ratio to the reference."""
+    from validation.fem import solve_fem_static
+    from validation.heldout import build_heldout_case
+    from validation.springs import spring_static
+    from volspring import Model
+    from volspring.elements.tet_kinematics import TetGradients
+
+    case = build_heldout_case(name, nu=nu)
+    fem = {element: solve_fem_static(case.mesh, case.material_tuple, element=element, **case.fem_arguments())
+           for element in ("TH", "P2", "P1")}
+    best = fem[reference_element]
+    k = int(np.argmax(np.linalg.norm(best.displacement, axis=1)))
+    direction = best.displacement[k] / np.linalg.norm(best.displacement[k])
+    reference = best.displacement[k] @ direction
+    kinematics = TetGradients.at_rest(case.mesh.points, case.mesh.tets)
+    line = f"{name:18s} nu {nu:5.3f} nodes {case.mesh.node_count:4d}" + "".join(
+        f" {element} {fem[element].displacement[k] @ direction / reference:.3f}"
+        for element in ("TH", "P2", "P1") if element != reference_element)
+    rungs = [("springs", None), ("springs+volume", None)] + [("smoothed", a) for a in alphas]
+    for rung, alpha in rungs:
+        try:
+            model = Model.from_mesh(case.mesh, case.material, model=rung, alpha=alpha)
+        except ValueError:
+            line += f" | {rung} refused"
+            continue
+        u = spring_static(case, model).displacement
+        volume = float(kinematics.volumes @ np.trace(kinematics.deformation(u), axis1=1, axis2=2))
+        label = rung if alpha is None else f"a={alpha:g}"
+        line += f" | {label} {u[k] @ direction / reference:.3f} dV {volume / best.volume_change:.3g}"
+    return line
 
 
 if __name__ == "__main__":

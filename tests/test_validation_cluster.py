@@ -12,15 +12,17 @@ from validation.cli import main as validate_main
 from validation.report.runner import run_validation
 from volspring.sweep import sweep_client
 
-# A case of each kind (static, modal, held-out shape) and a study, on coarse meshes: about 5 s serially.
-CASES = ["cantilever_gravity", "cantilever_modes", "cauchy", "torus_gravity"]
+# A case of each kind (static, modal, held-out shape) and two studies, the speed study split per run on
+# the cluster, on coarse meshes: about 10 s serially.
+CASES = ["cantilever_gravity", "cantilever_modes", "cauchy", "speed", "torus_gravity"]
 
 
 def without_times(value):
-    """``value`` with every wall time and cost left out (keys holding "seconds" or "cost"), and the run's date."""
+    """``value`` with every wall time and cost left out (keys holding "seconds" or "cost"), the run's date, and the
+    speed study's Pareto marks (which follow from its wall times)."""
     if isinstance(value, dict):
         return {key: without_times(item) for key, item in value.items()
-                if "seconds" not in key and "cost" not in key and key not in ("created", "command")}
+                if "seconds" not in key and "cost" not in key and key not in ("created", "command", "pareto")}
     if isinstance(value, list):
         return [without_times(item) for item in value]
     return value
@@ -39,6 +41,30 @@ def test_the_cluster_gives_the_serial_results(tmp_path):
     rows = [(row["case"], row["rung"]) for row in clustered["ladder"]["rows"]]
     assert rows == [(row["case"], row["rung"]) for row in serial["ladder"]["rows"]]  # the held-out shape last
     assert rows[-1][0] == "torus_gravity"
+    runs = clustered["studies"]["speed"]["runs"]  # merged from one task per run, in the study's order
+    assert [run["integrator"] for run in runs] == [run["integrator"] for run in serial["studies"]["speed"]["runs"]]
+    assert any("pareto" in run for run in runs)
+
+
+def test_merged_speed_studies_mark_the_front_over_all_their_runs():
+    from validation.studies import merge_speed_studies, pareto_front
+
+    def run(name, time, error):
+        return {"integrator": name, "wall_seconds_per_simulated_second": time, "settled_deflection_error": error,
+                "first_frequency_error": -error, "pareto": ["stale"]}
+
+    setup = {"case": "cantilever_gravity", "rule": "van_gelder", "per_height": 1, "node_count": 44,
+             "duration_s": 1.0, "drag_rate_per_s": 2.0}
+    parts = [{**setup, "runs": [run("verlet", 1.0, 0.1), run("verlet", 2.0, 0.01)]},
+             {**setup, "runs": [run("rk4", 1.5, 0.2), run("rk4", 0.5, 0.3)]}]
+    merged = merge_speed_studies(parts)
+    times = [r["wall_seconds_per_simulated_second"] for r in merged["runs"]]
+    errors = [abs(r["settled_deflection_error"]) for r in merged["runs"]]
+    on_front = [k for k, r in enumerate(merged["runs"]) if "settled_deflection_error" in r.get("pareto", [])]
+    assert sorted(on_front) == sorted(pareto_front(times, errors)) == [0, 1, 3]
+    assert all("stale" not in r.get("pareto", []) for r in merged["runs"])
+    with pytest.raises(ValueError, match="different set-ups"):
+        merge_speed_studies([parts[0], {**parts[1], "duration_s": 2.0}])
 
 
 @pytest.mark.parametrize("extra, message", [

@@ -46,7 +46,8 @@ import os
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ["INTEGRATOR_STEPS", "QUICK_INTEGRATOR_STEPS", "cauchy_study", "fit_rate", "pareto_front", "refinement_study", "speed_study"]
+__all__ = ["INTEGRATOR_STEPS", "QUICK_INTEGRATOR_STEPS", "cauchy_study", "fit_rate", "merge_speed_studies",
+           "pareto_front", "refinement_study", "speed_study"]
 
 logger = logging.getLogger(__name__)
 
@@ -212,6 +213,37 @@ def pareto_front(times: ArrayLike, errors: ArrayLike) -> list:
     return front
 
 
+def _mark_pareto(runs: list) -> None:
+    """Mark each run of the speed study on the front of time against each error (its ``pareto`` list), in place."""
+    for key in ("first_frequency_error", "settled_deflection_error"):
+        times = [run["wall_seconds_per_simulated_second"] if run.get(key) is not None else math.nan for run in runs]
+        errors = [abs(run[key]) if run.get(key) is not None else math.nan for run in runs]
+        for index in pareto_front(times, errors):
+            runs[index].setdefault("pareto", []).append(key)
+
+
+def merge_speed_studies(parts: Sequence[dict]) -> dict:
+    """One speed study from parts run with disjoint ``steps`` (each integrator in a task of its own): the runs in
+    the parts' order, the Pareto fronts over them all, the rest (the same in every part) from the first.
+
+    Raises
+    ------
+    ValueError
+        For no part, or parts of different set-ups (another case, rule, duration or drag).
+    """
+    if not parts:
+        raise ValueError("no speed study to merge")
+    shared = ("case", "rule", "per_height", "node_count", "duration_s", "drag_rate_per_s")
+    for part in parts[1:]:
+        if any(part[key] != parts[0][key] for key in shared):
+            raise ValueError("speed studies of different set-ups cannot be merged: "
+                             + ", ".join(f"{key} {parts[0][key]} / {part[key]}" for key in shared
+                                         if part[key] != parts[0][key]))
+    runs = [{key: value for key, value in run.items() if key != "pareto"} for part in parts for run in part["runs"]]
+    _mark_pareto(runs)
+    return {**parts[0], "runs": runs}
+
+
 def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps: dict[str, Any] | None = None,
                 periods: float = 5.0, duration: float | None = None, residual_amplitude: float = 5e-5,
                 drag_rate: float | None = None, frame_dt: float = 1e-3, folder: str | os.PathLike[str] | None = None,
@@ -334,11 +366,7 @@ def speed_study(*, per_height: int = 1, rule: str = "van_gelder", steps: dict[st
                     first_frequency_error_vs_fem=None if frequency is None else (frequency - frequency_fem) / frequency_fem)
             runs.append(record_run)
             logger.info("speed: %s dt = %.3g s: %s, %.2f s", name, dt, "stable" if stable else "diverged", elapsed)
-    for key in ("first_frequency_error", "settled_deflection_error"):
-        times = [run["wall_seconds_per_simulated_second"] if run.get(key) is not None else math.nan for run in runs]
-        errors = [abs(run[key]) if run.get(key) is not None else math.nan for run in runs]
-        for index in pareto_front(times, errors):
-            runs[index].setdefault("pareto", []).append(key)
+    _mark_pareto(runs)
     return {"case": "cantilever_gravity", "rule": rule, "per_height": per_height, "node_count": case.mesh.node_count,
             "duration_s": duration, "periods": duration * frequency_exact, "drag_rate_per_s": drag_rate,
             "damping_ratio": drag_rate / (4.0 * math.pi * frequency_exact),
