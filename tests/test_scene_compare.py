@@ -192,3 +192,41 @@ def test_a_sweep_records_the_comparison_as_measured_columns(tmp_path):
         assert on_disk["measured"]["compare_rms_error"] == record["measured"]["compare_rms_error"]
     springs, smoothed = (float(row["compare_rms_error"]) for row in rows)
     assert smoothed < springs  # the ladder's order, as the command line's runs above
+
+
+def test_a_reference_for_another_body_is_refused():
+    from validation.scene_comparison import static_fem_reference
+
+    soft, stiff = beam_problem(0.3), beam_problem(0.3)
+    stiff = StaticProblem(stiff.mesh, Material(2e6, 0.3, 1000.0), held=stiff.held, gravity=stiff.gravity, body=0,
+                          nodes=stiff.nodes)
+    reference = static_fem_reference(soft, cache=False)
+    zero = np.zeros((soft.mesh.node_count, 3))
+    assert compare("static_fem", soft, zero, reference=reference) == compare("static_fem", soft, zero, cache=False)
+    with pytest.raises(ValueError, match="reference answers another problem"):
+        compare("static_fem", stiff, zero, reference=reference)
+
+
+def test_a_sweep_solves_the_reference_once_per_body_and_shares_it(tmp_path, monkeypatch):
+    import validation.fem
+    from volspring.sweep import run_sweep, sweep_client
+    from volspring.sweep._measure import reference_key
+    from volspring.scene_file import read_scene
+
+    solves = []
+    original = validation.fem.solve_fem_static
+    monkeypatch.setattr(validation.fem, "solve_fem_static", lambda *a, **k: solves.append(1) or original(*a, **k))
+    grid = {"bodies[0].size": [0.1], "duration": [0.1], "compare.cache": [False],
+            "integrator.dt": [0.02, 0.05], "bodies[0].model": ["springs", "smoothed"]}
+    serial = run_sweep(EXAMPLE, grid, tmp_path / "serial")
+    assert len(solves) == 1  # four runs, one body: one FEM solve (no disk cache: compare.cache = false)
+    assert {record["reference"] for record in serial.records} == {"shared"}
+    with sweep_client(workers=2) as client:
+        clustered = run_sweep(EXAMPLE, grid, tmp_path / "cluster", client=client)
+    assert [record["measured"] for record in clustered.records] == [record["measured"] for record in serial.records]
+    assert {record["reference"] for record in clustered.records} == {"shared"}
+    # What the key leaves out (steps, rungs) shares a reference; the material does not.
+    scenes = [read_scene(EXAMPLE, overrides=overrides) for overrides in (
+        [], ["integrator.dt=0.05", 'bodies[0].model="springs"', "duration=3"], ["bodies[0].material.E=2e7"])]
+    keys = [reference_key(scene) for scene in scenes]
+    assert keys[0] == keys[1] != keys[2]

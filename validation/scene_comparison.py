@@ -3,11 +3,13 @@
 A scene file's ``[compare]`` table (``case = "static_fem"``) asks for it; volspring finds it through the
 entry-point group ``volspring.comparisons`` (:mod:`volspring.comparisons`), which this package registers. The
 reference is the static equilibrium of the body's own mesh, material, held nodes and gravity
-(:func:`validation.fem.solve_fem_static`, through the on-disk cache :mod:`validation.cache`: a sweep's runs on
-one mesh and material solve it once), Taylor-Hood by default (free of volumetric locking as nu -> 1/2, the
+(:func:`validation.fem.solve_fem_static`, through the on-disk cache :mod:`validation.cache`), Taylor-Hood by
+default (free of volumetric locking as nu -> 1/2, the
 ladder's reference: :data:`validation.ladder.STATIC_REFERENCE`). It is compared with the body's displacement at
 the end of the run, so the run should have settled there (damped, long enough: the run's kinetic energy says
-how far it is from rest).
+how far it is from rest). The reference can be made apart (:func:`static_fem_reference`, a :class:`FemReference`
+that knows the problem it answers) and handed to :func:`static_fem`: a sweep makes one per body and shares it
+among the runs (:func:`volspring.comparisons.reference`).
 
 The numbers (:data:`MEASURES`), the same ones the validation report gives a model on its cases:
 
@@ -38,6 +40,8 @@ Examples
 
 from __future__ import annotations
 
+import hashlib
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -51,7 +55,7 @@ from validation.springs import deformed_volume_change
 if TYPE_CHECKING:
     from volspring.comparisons import StaticProblem
 
-__all__ = ["MEASURES", "static_fem"]
+__all__ = ["FemReference", "MEASURES", "problem_digest", "static_fem", "static_fem_reference"]
 
 #: The numbers :func:`static_fem` returns, in this order (see the module docstring).
 MEASURES = ("peak_ratio", "rms_error", "max_error", "volume_change_ratio", "reference_peak_m", "reference_element")
@@ -72,8 +76,64 @@ class _Held:
         return f"the {int(self.held.sum())} held nodes"
 
 
+@dataclass(frozen=True, eq=False)
+class FemReference:
+    """The FEM answer :func:`static_fem` compares with, made once for every run of one body (a sweep sends it to the
+    runs that share it: :func:`static_fem_reference`).
+
+    Parameters
+    ----------
+    digest : str
+        SHA-256 of the problem and element it answers (:func:`problem_digest`), checked before it is used.
+    element : str
+    displacement : (n, 3) float
+        [m]
+    volume_change, deformed_volume_change : float
+        [m^3], as :class:`validation.fem.StaticSolution` has them.
+    """
+
+    digest: str
+    element: str
+    displacement: np.ndarray
+    volume_change: float
+    deformed_volume_change: float
+
+
+def problem_digest(problem: StaticProblem, element: str) -> str:
+    """The hex SHA-256 of what the reference of ``problem`` depends on: mesh, material, held nodes, gravity,
+    element."""
+    digest = hashlib.sha256(element.encode())
+    material = problem.material
+    for array in (problem.mesh.points, problem.mesh.tets, problem.held, np.zeros(3) if problem.gravity is None
+                  else problem.gravity, np.array([material.E, material.nu, material.density])):
+        array = np.ascontiguousarray(array)
+        digest.update(f"{array.dtype}{array.shape}".encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
+
+
+def static_fem_reference(problem: StaticProblem, *, element: str | None = None, cache: bool = True) -> FemReference:
+    """The FEM static equilibrium of the problem's body (see :func:`static_fem` for the parameters).
+
+    Raises
+    ------
+    ValueError
+        When there is no gravity, the held nodes do not hold the body, or the element is unknown.
+    """
+    mesh, material = problem.mesh, problem.material
+    if problem.gravity is None:
+        raise ValueError("the scene has no gravity field: static_fem compares the body's sag under gravity; add "
+                         "[[fields]] type = \"gravity\"")
+    check_held(mesh, problem.held)
+    element = element or ("TH" if material.nu > 0 else "P2")
+    solve = reference_cache.cached_solve_static if cache else fem.solve_fem_static
+    solution = solve(mesh, material, clamp=_Held(problem.held), gravity=problem.gravity, element=element)
+    return FemReference(problem_digest(problem, element), element, solution.displacement, solution.volume_change,
+                        solution.deformed_volume_change)
+
+
 def static_fem(problem: StaticProblem, displacement: np.ndarray, *, element: str | None = None,
-               cache: bool = True) -> dict:
+               cache: bool = True, reference: FemReference | None = None) -> dict:
     """The body's displacement against the FEM static equilibrium of the same body.
 
     Parameters
@@ -86,6 +146,8 @@ def static_fem(problem: StaticProblem, displacement: np.ndarray, *, element: str
         The FEM element; default Taylor-Hood, or P2 for nu <= 0 (Taylor-Hood needs nu > 0).
     cache : bool
         Read and write the reference in :func:`validation.cache.default_folder` (``$VOLSPRING_CACHE``).
+    reference : FemReference, optional
+        The answer, made already by :func:`static_fem_reference` (a sweep's runs share one); made here if not given.
 
     Returns
     -------
@@ -96,24 +158,26 @@ def static_fem(problem: StaticProblem, displacement: np.ndarray, *, element: str
     ------
     ValueError
         When the held nodes do not hold the body (every rigid motion must be fixed for a static answer), there is
-        no gravity, or the element is not one of the three.
+        no gravity, the element is not one of the three, or ``reference`` answers another problem.
     """
-    mesh, material = problem.mesh, problem.material
-    if problem.gravity is None:
-        raise ValueError("the scene has no gravity field: static_fem compares the body's sag under gravity; add "
-                         "[[fields]] type = \"gravity\"")
-    check_held(mesh, problem.held)
-    element = element or ("TH" if material.nu > 0 else "P2")
-    solve = reference_cache.cached_solve_static if cache else fem.solve_fem_static
-    solution = solve(mesh, material, clamp=_Held(problem.held), gravity=problem.gravity, element=element)
-    reference = solution.displacement
-    size = np.linalg.norm(reference, axis=1)
+    mesh = problem.mesh
+    if reference is None:
+        reference = static_fem_reference(problem, element=element, cache=cache)
+    elif reference.digest != problem_digest(problem, element or reference.element):
+        raise ValueError("reference answers another problem than this body's (mesh, material, held nodes, gravity "
+                         "or element differ); make it with static_fem_reference(problem)")
+    answer = reference.displacement
+    size = np.linalg.norm(answer, axis=1)
     peak = int(np.argmax(size))
-    direction = reference[peak] / size[peak]
-    bending = abs(solution.volume_change) < abs(solution.deformed_volume_change - solution.volume_change)
+    direction = answer[peak] / size[peak]
+    bending = abs(reference.volume_change) < abs(reference.deformed_volume_change - reference.volume_change)
     volume = deformed_volume_change(mesh, displacement)
-    errors = displacement_errors(displacement, reference)
+    errors = displacement_errors(displacement, answer)
     return {"peak_ratio": float(displacement[peak] @ direction / size[peak]),
             "rms_error": errors["rms_displacement_error"], "max_error": errors["max_displacement_error"],
-            "volume_change_ratio": None if bending else float(volume / solution.deformed_volume_change),
-            "reference_peak_m": float(size[peak]), "reference_element": element}
+            "volume_change_ratio": None if bending else float(volume / reference.deformed_volume_change),
+            "reference_peak_m": float(size[peak]), "reference_element": reference.element}
+
+
+#: The comparison's reference alone, which volspring.comparisons.reference calls to share one among runs.
+static_fem.reference = static_fem_reference  # type: ignore[attr-defined]

@@ -10,7 +10,8 @@ inputs give the same numbers, bit for bit: the sweep table records them as measu
 
 A comparison is ``NAME = "package.module:function"`` in the group, with
 ``function(problem, displacement, **options) -> dict``; :func:`available` lists the installed ones and
-:func:`compare` runs one.
+:func:`compare` runs one. A comparison whose reference is costly (a FEM solve) offers it apart,
+``function.reference(problem, **options)``, so that the runs of one body share one (:func:`reference`).
 
 Examples
 --------
@@ -32,7 +33,7 @@ if TYPE_CHECKING:
     from meshing.mesh import TetMesh
     from volspring.material import Material
 
-__all__ = ["GROUP", "StaticProblem", "available", "check_name", "compare"]
+__all__ = ["GROUP", "StaticProblem", "available", "check_name", "compare", "reference"]
 
 #: The entry-point group of the comparisons: ``NAME = "package.module:function"``.
 GROUP = "volspring.comparisons"
@@ -87,7 +88,22 @@ def check_name(name: str) -> str | None:
     return f"is not an installed comparison (installed: {listed}){hint}"
 
 
-def compare(name: str, problem: StaticProblem, displacement: np.ndarray, **options: Any) -> dict:
+def reference(name: str, problem: StaticProblem, **options: Any) -> Any:
+    """The comparison's reference answer for ``problem``, made once to be shared by the runs of one body (a sweep's),
+    or None for a comparison that has none apart (it then makes its own in every :func:`compare`).
+
+    A comparison offers one as an attribute of its function, ``function.reference(problem, **options)``, and takes
+    it back as ``function(problem, displacement, reference=..., **options)``.
+    """
+    refusal = check_name(name)
+    if refusal is not None:
+        raise ValueError(f"comparison \"{name}\" {refusal}")
+    maker = getattr(available()[name].load(), "reference", None)
+    return None if maker is None else maker(problem, **options)
+
+
+def compare(name: str, problem: StaticProblem, displacement: np.ndarray, *, reference: Any = None,
+            **options: Any) -> dict:
     """Run the comparison ``name`` on the displacement of the problem's mesh nodes.
 
     Parameters
@@ -97,6 +113,8 @@ def compare(name: str, problem: StaticProblem, displacement: np.ndarray, **optio
     problem : StaticProblem
     displacement : (n, 3) float
         The displacement of the body's mesh nodes at the end of the run [m].
+    reference : object, optional
+        The comparison's answer made already by :func:`reference` for this problem; None: it makes its own.
     **options
         The comparison's own options (``element`` for ``static_fem``).
 
@@ -118,4 +136,6 @@ def compare(name: str, problem: StaticProblem, displacement: np.ndarray, **optio
         raise ValueError(f"displacement has shape {displacement.shape}; expected ({problem.mesh.node_count}, 3), one "
                          "row per mesh node of the body")
     function = available()[name].load()
+    if reference is not None:
+        options["reference"] = reference
     return dict(function(problem, displacement, **options))

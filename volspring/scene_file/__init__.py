@@ -101,7 +101,7 @@ import tomllib
 from pathlib import Path
 
 from volspring.scene_file._assemble import AssembledScene, assemble_scene
-from volspring.scene_file._compare import compare_final_state, comparison_line
+from volspring.scene_file._compare import compare_final_state, comparison_line, comparison_reference
 from volspring.scene_file._keys import SCENE, resolved
 from volspring.scene_file._schema import SceneFileError, joined, unknown_key
 from typing import Any
@@ -109,7 +109,8 @@ from collections.abc import Sequence
 import os
 
 __all__ = ["AssembledScene", "SCENE", "SceneFileError", "assemble_scene", "compare_final_state", "comparison_line",
-           "load_toml", "parse_assignment", "read_scene", "resolve_scene", "set_value", "split_key_path"]
+           "comparison_reference", "load_toml", "parse_assignment", "read_scene", "resolve_scene", "set_value",
+           "split_key_path"]
 
 _SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_-]*)((?:\[\d+\])*)")
 

@@ -10,7 +10,7 @@ contact or obstacles. Run before any step, so a scene that cannot be compared co
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from volspring.comparisons import StaticProblem
     from volspring.scene import Scene
 
-__all__ = ["compare_final_state", "comparison_line", "static_problem"]
+__all__ = ["compare_final_state", "comparison_line", "comparison_reference", "static_problem"]
 
 #: Fields a static reference reproduces: gravity is its load, drag vanishes at rest.
 STATIC_FIELDS = ("gravity", "drag")
@@ -86,17 +86,32 @@ def static_problem(scene: dict, bodies: tuple, built: Scene) -> StaticProblem:
                          name=specs[index].get("name", ""))
 
 
-def compare_final_state(scene: dict, problem: StaticProblem, positions: np.ndarray) -> dict:
-    """``scene["compare"]``'s comparison of the body at ``positions`` (the model's, at the end of the run).
+def compare_final_state(scene: dict, problem: StaticProblem, positions: np.ndarray, *,
+                        reference: Any = None) -> dict:
+    """``scene["compare"]``'s comparison of the body at ``positions`` (the model's, at the end of the run), against
+    ``reference`` when it is given (:func:`comparison_reference`, shared by runs of one body).
 
     Returns the comparison's numbers (:func:`volspring.comparisons.compare`).
     """
     from volspring.comparisons import compare
 
     table = scene["compare"]
-    options = {name: table[name] for name in ("element", "cache") if table.get(name) is not None}
     displacement = np.asarray(positions)[problem.nodes] - problem.mesh.points
-    return compare(table["case"], problem, displacement, **options)
+    return compare(table["case"], problem, displacement, reference=reference, **_options(table))
+
+
+def comparison_reference(scene: dict, problem: StaticProblem) -> Any:
+    """The reference answer of ``scene["compare"]`` for ``problem`` (:func:`volspring.comparisons.reference`), or
+    None when the comparison has none apart."""
+    from volspring.comparisons import reference
+
+    table = scene["compare"]
+    return reference(table["case"], problem, **_options(table))
+
+
+def _options(table: dict) -> dict:
+    """The comparison's own options of a ``[compare]`` table."""
+    return {name: table[name] for name in ("element", "cache") if table.get(name) is not None}
 
 
 def comparison_line(scene: dict, numbers: dict) -> str:

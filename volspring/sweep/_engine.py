@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 from meshing._io import atomic_path
 from volspring.sweep._cluster import BLAS_ENVIRONMENT, finishing
-from volspring.sweep._measure import run_scene
+from volspring.sweep._measure import reference_key, reference_of, run_scene
 from volspring.sweep._parameters import sweep_combinations
 from volspring.sweep._table import TABLE_NAME, read_record, table_columns, write_record, write_table
 
@@ -228,8 +228,13 @@ def run_sweep(scene_path: str | os.PathLike[str], parameters: Mapping[str, Seque
     missing = []
     try:
         if client is None:
+            references: dict[str, Any] = {}  # a [compare] reference per key, made at its first run
             for identifier, scene in runnable.items():
-                finish(identifier, run_scene(scene, base=base, **measures) | {"worker": _worker()})
+                key = reference_key(scene)
+                if key is not None and key not in references:
+                    references[key] = reference_of(scene, base=base)
+                finish(identifier, run_scene(scene, base=base, reference=references.get(key or ""), **measures)
+                       | {"worker": _worker()})
         else:
             missing = _run_on_cluster(client, runnable, base, measures, files, finish)
     finally:
@@ -247,30 +252,53 @@ def _run_on_cluster(client, runnable, base, measures, files, finish) -> list:
     from distributed.scheduler import KilledWorker
 
     shared = client.scatter([files], hash=False)[0] if files else None  # once, shared by every task
-    calls = {identifier: (_run_task, (scene,), {"base": base, "measures": measures, "files": shared})
+    # A [compare] reference (a FEM solve) is one task per distinct key; the runs that share it get its result, sent
+    # to each worker once, instead of every run solving it again.
+    references = {}
+    for identifier, scene in runnable.items():
+        key = reference_key(scene)
+        if key is not None and key not in references:
+            references[key] = client.submit(_reference_task, scene, base=base, files=shared, pure=False,
+                                            key=f"volspring-reference-{identifier}")
+    calls = {identifier: (_run_task, (scene,), {"base": base, "measures": measures, "files": shared,
+                                                 "reference": references.get(reference_key(scene) or "")})
              for identifier, scene in runnable.items()}
     missing = []
-    for identifier, future in finishing(client, calls, prefix="volspring-sweep"):
-        try:
-            record = future.result()
-        except KilledWorker as error:  # the run killed its worker at every try (memory, a crash): its row
-            record = {**_refused_record(error), "error_type": "KilledWorker"}
-        except Exception as error:  # lost to the cluster, not the run's failure: no record, run it next time
-            logger.warning("run %s: no result from the cluster (%s: %s)", identifier, type(error).__name__, error)
-            missing.append(identifier)
-            continue
-        finish(identifier, record)
+    try:
+        for identifier, future in finishing(client, calls, prefix="volspring-sweep"):
+            try:
+                record = future.result()
+            except KilledWorker as error:  # the run killed its worker at every try (memory, a crash): its row
+                record = {**_refused_record(error), "error_type": "KilledWorker"}
+            except Exception as error:  # lost to the cluster, not the run's failure: no record, run it next time
+                logger.warning("run %s: no result from the cluster (%s: %s)", identifier, type(error).__name__, error)
+                missing.append(identifier)
+                continue
+            finish(identifier, record)
+    finally:
+        client.cancel(list(references.values()))  # an interruption leaves no reference solving on the cluster
     return missing
 
 
-def _run_task(scene, *, base, measures, files):
+def _run_task(scene, *, base, measures, files, reference=None):
     """A worker's task: the scattered mesh files written to this machine once, then :func:`run_scene`."""
-    if files:
-        scene = copy.deepcopy(scene)
-        for spec in scene["bodies"]:
-            if "mesh" in spec and spec["mesh"] in files:
-                spec["mesh"] = str(_materialised(files[spec["mesh"]]))
-    return run_scene(scene, base=base, **measures) | {"worker": _worker()}
+    return run_scene(_local(scene, files), base=base, reference=reference, **measures) | {"worker": _worker()}
+
+
+def _reference_task(scene, *, base, files):
+    """A worker's task: the ``[compare]`` reference shared by the runs of one :func:`reference_key`."""
+    return reference_of(_local(scene, files), base=base)
+
+
+def _local(scene, files):
+    """``scene`` with the names of the scattered mesh files replaced by their copies on this machine."""
+    if not files:
+        return scene
+    scene = copy.deepcopy(scene)
+    for spec in scene["bodies"]:
+        if "mesh" in spec and spec["mesh"] in files:
+            spec["mesh"] = str(_materialised(files[spec["mesh"]]))
+    return scene
 
 
 def _materialised(entry) -> Path:

@@ -30,6 +30,8 @@ scene's N lowest natural frequencies at rest, ``frequency_1_hz`` ... (time ``sec
 
 from __future__ import annotations
 
+import json
+import logging
 import math
 import os
 import time
@@ -40,7 +42,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["MEASURED", "SOLVER", "run_scene"]
+__all__ = ["MEASURED", "SOLVER", "reference_key", "reference_of", "run_scene"]
+
+logger = logging.getLogger(__name__)
 
 #: The measured quantities of every run, in the table's order (see the module docstring).
 MEASURED = ("t_end", "displacement_max", "displacement_max_node", "volume_change", "inverted_tets",
@@ -50,7 +54,7 @@ SOLVER = ("steps", "cg_iterations_mean", "cg_iterations_max", "cg_iterations_tot
 
 
 def run_scene(scene: dict, *, base: str | os.PathLike[str] = ".", probes: Mapping[str, Sequence[float]] | None = None,
-              frequencies: int = 0) -> dict:
+              frequencies: int = 0, reference: Any = None) -> dict:
     """Assemble, step and measure one resolved scene; never raises for a failure of the run itself.
 
     Parameters
@@ -65,6 +69,9 @@ def run_scene(scene: dict, *, base: str | os.PathLike[str] = ".", probes: Mappin
     frequencies : int
         Also measure the scene's lowest natural frequencies at rest, this many (``frequency_1_hz``, ...:
         :func:`volspring.modes.solve_modes`, with the scene's supports; deterministic); 0 measures none.
+    reference : object, optional
+        The ``[compare]`` comparison's reference answer, made once for the runs of one body
+        (:func:`reference_of`); None: the comparison makes its own.
 
     Returns
     -------
@@ -112,7 +119,8 @@ def run_scene(scene: dict, *, base: str | os.PathLike[str] = ".", probes: Mappin
                 from volspring.scene_file import compare_final_state
 
                 comparing = time.perf_counter()
-                numbers = compare_final_state(scene, built.comparison, result.state.x)
+                numbers = compare_final_state(scene, built.comparison, result.state.x, reference=reference)
+                record["reference"] = "shared" if reference is not None else "own"
                 measured.update({f"compare_{name}": value for name, value in numbers.items()})
                 seconds["compare"] = time.perf_counter() - comparing
             if frequencies:
@@ -133,6 +141,42 @@ def run_scene(scene: dict, *, base: str | os.PathLike[str] = ".", probes: Mappin
     record["warnings"] = list(dict.fromkeys(_one_line(warning.message) for warning in caught))
     seconds["wall"] = time.perf_counter() - started
     return record
+
+
+def reference_of(scene: dict, *, base: str | os.PathLike[str] = ".") -> Any:
+    """The reference answer of a resolved scene's ``[compare]`` (the FEM answer of its body: made once and shared by
+    the runs that :func:`reference_key` groups), or None: no ``[compare]``, no reference apart, or one that cannot
+    be made (each run then meets the error itself, as its row)."""
+    from volspring.scene_file import assemble_scene, comparison_reference
+
+    if "compare" not in scene:
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the runs report the scene's warnings
+            built = assemble_scene(scene, base=Path(base))
+            return None if built.comparison is None else comparison_reference(scene, built.comparison)
+    except Exception as error:  # the runs will fail on it, each with its row
+        logger.info("no shared reference (%s: %s); each run makes its own", type(error).__name__, error)
+        return None
+
+
+#: The keys of a body that change its model but not its static problem (mesh, material, held nodes, gravity).
+MODEL_ONLY_KEYS = ("model", "alpha", "rule", "stiffness", "damping_ratio", "velocity", "angular_velocity", "name")
+
+
+def reference_key(scene: dict) -> str | None:
+    """What a ``[compare]`` reference depends on, as text: runs with equal keys share one (None without
+    ``[compare]``). It leaves out the integrator, the duration, the outputs and the compared body's model keys
+    (:data:`MODEL_ONLY_KEYS`), so a sweep over steps, integrators or rungs solves the reference once; anything else
+    that differs (the material, the mesh, the supports, gravity) gives another key."""
+    if "compare" not in scene:
+        return None
+    table = scene["compare"]
+    body = {key: value for key, value in scene["bodies"][table["body"]].items() if key not in MODEL_ONLY_KEYS}
+    fields = [field for field in scene["fields"] if field["type"] == "gravity"]
+    return json.dumps({"compare": table, "body": body, "supports": scene["supports"], "fields": fields},
+                      sort_keys=True, default=str)
 
 
 def _measured(scene, state, probes) -> dict:
