@@ -1,8 +1,8 @@
 """The known keys of a scene file, one table per section, and the check of a scene against them.
 
-Each table maps a key to a :class:`~volspring.scene_file._schema.Key`: the kind of value it takes, its default, and where it goes in
-the API (``maps``). Only the checks no volspring constructor makes are here (kinds, the few ranges of
-the run itself, which key needs which); the values themselves are checked where they enter the API
+Each table maps a key to a :class:`~volspring.scene_file._schema.Key`: the kind of value it takes, its default,
+and where it goes in the API (``maps``). Only the checks no volspring constructor makes are here (kinds, the few
+ranges of the run itself, which key needs which); the values themselves are checked where they enter the API
 (:class:`~volspring.Material`, the forces, :meth:`Model.from_bodies <volspring.Model.from_bodies>`,
 :func:`~volspring.regions.parse_region`), and their messages are prefixed with the key path by
 :func:`volspring.scene_file._assemble.at`.

@@ -3,10 +3,11 @@
 :func:`run_sweep` resolves every combination in the calling process (a run is identified by the hash of its
 resolved scene, :func:`run_id`), skips those whose record is already on disk, and runs the others: in this
 process with ``client=None``, else as one Dask task each on ``client``'s cluster (:func:`sweep_client` makes a
-local cluster of worker processes, or connects to an existing scheduler: :mod:`volspring.sweep._cluster`). What a task carries is the resolved
-scene (a small dict) and the options; the bytes of the mesh files the scenes name are scattered once and shared
-by every task (:func:`_mesh_files`), so the workers need no access to the caller's files. Records come back to the
-calling process, which writes them as they arrive (:mod:`volspring.sweep._table`).
+local cluster of worker processes, or connects to an existing scheduler: :mod:`volspring.sweep._cluster`). What a
+task carries is the resolved scene (a small dict) and the options; the bytes of the mesh files the scenes name
+are scattered once and shared by every task (:func:`_mesh_files`), so the workers need no access to the caller's
+files, and a ``[compare]`` reference is made once per body (a task of its own) and shared by its runs. Records
+come back to the calling process, which writes them as they arrive (:mod:`volspring.sweep._table`).
 
 A run that fails is a record with its error (:func:`~volspring.sweep._measure.run_scene` does not raise for the
 run's own failures; a run whose worker dies at every try, Dask's ``KilledWorker``, is recorded so too). A worker
