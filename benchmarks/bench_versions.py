@@ -86,6 +86,23 @@ CHILD = textwrap.dedent('''
 ''')
 
 
+#: Releases by their commit, for a clone that did not bring its tags along (``git clone`` of a bare copy, a
+#: submission): ``v0.1.0`` is the commit the reliability issue tagged.
+KNOWN_RELEASES = {"v0.1.0": "090814f"}
+
+
+def resolved_ref(ref: str) -> str:
+    """``ref`` if git knows it, else the commit of a known release of that name (:data:`KNOWN_RELEASES`)."""
+    known = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--verify", "--quiet", f"{ref}^{{commit}}"],
+                           capture_output=True, text=True)
+    if known.returncode == 0:
+        return ref
+    if ref in KNOWN_RELEASES:
+        print(f"git has no ref {ref} here (tags not cloned): using its commit {KNOWN_RELEASES[ref]}", file=sys.stderr)
+        return KNOWN_RELEASES[ref]
+    raise SystemExit(f"bench_versions: git knows no ref {ref!r}; give a tag, branch or commit with --ref")
+
+
 def baseline_python(ref: str) -> Path:
     """The Python of a venv holding ``ref`` installed, made on first use."""
     folder = ROOT / ".bench" / ref
@@ -94,7 +111,8 @@ def baseline_python(ref: str) -> Path:
         return python
     source = folder / "src"
     source.mkdir(parents=True, exist_ok=True)
-    archive = subprocess.run(["git", "-C", str(ROOT), "archive", ref], check=True, capture_output=True).stdout
+    archive = subprocess.run(["git", "-C", str(ROOT), "archive", resolved_ref(ref)], check=True,
+                             capture_output=True).stdout
     subprocess.run(["tar", "-x", "-C", str(source)], input=archive, check=True)
     subprocess.run([sys.executable, "-m", "venv", str(folder / "venv")], check=True)
     subprocess.run([str(python), "-m", "pip", "install", "-q", str(source)], check=True)
