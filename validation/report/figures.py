@@ -19,11 +19,12 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from matplotlib.artist import Artist
     from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
 
-__all__ = ["log_ticks", "model_label", "render_figures"]
+__all__ = ["log_ticks", "model_label", "render_figures", "svg_uri"]
 
 
-def _svg(figure) -> str:
+def svg_uri(figure: Figure) -> str:
     """The figure as an SVG data URI (closed afterwards); no date in it, so that a report depends on its numbers only."""
     import matplotlib.pyplot as plt
 
@@ -97,7 +98,7 @@ def render_figures(results: dict) -> dict:
         axes.set_title(results["cases"][name]["title"])
         axes.legend(fontsize=8)
         axes.grid(alpha=0.3)
-        figures[f"profile_{name}"] = _svg(figure)
+        figures[f"profile_{name}"] = svg_uri(figure)
     refinement = results["studies"].get("refinement")
     if refinement:
         figure, axes = plt.subplots(figsize=(6.4, 4.2))
@@ -113,7 +114,7 @@ def render_figures(results: dict) -> dict:
         axes.grid(alpha=0.3, which="both")
         log_ticks(axes)
         axes.set_xticks(n, [str(count) for count in n])  # the node counts studied, not powers of ten
-        figures["refinement"] = _svg(figure)
+        figures["refinement"] = svg_uri(figure)
     sweep = results["cases"].get("uniaxial_compression", {}).get("sweep")
     if sweep:
         figure, axes = plt.subplots(figsize=(6.4, 4.2))
@@ -135,7 +136,7 @@ def render_figures(results: dict) -> dict:
         axes.set_title("Uniaxial compression: volume change")
         axes.legend(fontsize=7, ncol=2)
         axes.grid(alpha=0.3)
-        figures["volume"] = _svg(figure)
+        figures["volume"] = svg_uri(figure)
     speed = results["studies"].get("speed")
     if speed:
         figure, panels = plt.subplots(1, 2, figsize=(11, 4.2))
@@ -177,7 +178,7 @@ def render_figures(results: dict) -> dict:
         figure.legend(legend.values(), legend.keys(), loc="upper center", bbox_to_anchor=(0.5, 0.0), ncol=4,
                       fontsize=8, frameon=False)
         figure.tight_layout()
-        figures["speed"] = _svg(figure)
+        figures["speed"] = svg_uri(figure)
     cauchy = results["studies"].get("cauchy")
     if cauchy:
         figure, axes = plt.subplots(figsize=(6.4, 4.2))
@@ -195,7 +196,7 @@ def render_figures(results: dict) -> dict:
         axes.set_title("The Cauchy limit: one nu whatever is asked")
         axes.legend(fontsize=7)
         axes.grid(alpha=0.3)
-        figures["cauchy"] = _svg(figure)
+        figures["cauchy"] = svg_uri(figure)
     for index, sweep in enumerate(results.get("sweeps", [])):  # a user's sweeps: validation.report.trade
         from validation.report.trade import sweep_figure
 

@@ -149,7 +149,7 @@ def sweep_figure(sweep: dict) -> str | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from validation.report.figures import _svg, log_ticks
+    from validation.report.figures import log_ticks, svg_uri
 
     runs = sweep["runs"]
     figure, axes = plt.subplots(figsize=(7.5, 4.6))
@@ -173,7 +173,7 @@ def sweep_figure(sweep: dict) -> str | None:
     log_ticks(axes)
     axes.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, frameon=False)
     figure.tight_layout()
-    return _svg(figure)
+    return svg_uri(figure)
 
 
 def sweep_section(index: int, sweep: dict, figures: dict) -> Section:
