@@ -5,7 +5,9 @@ under gravity, E = 1e7 Pa, nu = 0.45 as in the README, dt = 0.01 s) both version
 steps in child processes launched alternately (baseline, ours, baseline, ours, ...), and the script
 prints the median CPU seconds per step of each (the median over the steps of a child, then over the
 children) and their ratio, the same in sparse mat-vecs of the step's system matrix timed in the same
-child (robust to the machine's speed drifting between children), and the mean CG iterations per step.
+child (robust to the machine's speed drifting between children), the mean CG iterations per step, the
+first step's extra time over a step in mat-vecs (the AMG build and the step's set-up), and the memory the
+stepping added per node (peak resident size after the steps less that before them, KiB).
 A contact scene (two cubes, the lower one pinned at its base, the upper one pressed onto it by a
 strong gravity through the penalty contact force) reports the CG iterations per step, where the
 contact stiffness is a non-spring Jacobian.
@@ -38,7 +40,7 @@ THREADS = {name: "1" for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MK
 
 # The child uses only what both versions offer (0.1 names; ours accepts them with deprecation warnings).
 CHILD = textwrap.dedent('''
-    import json, sys, time, warnings
+    import json, resource, sys, time, warnings
     warnings.simplefilter("ignore")
     import numpy as np
     from meshing import structured_box
@@ -64,8 +66,12 @@ CHILD = textwrap.dedent('''
         scene = Scene(model, forces=[Gravity(model.masses, (0, 0, -100.0)), ContactForce(system)], pins=Pins(below))
         state = scene.initial_state()
     integrator = ImplicitEuler()
+    resident = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # [KiB] with the libraries and the model
+    first = []
     for _ in range(3):
+        start = time.process_time()
         state = integrator.step(scene, state, 0.01)
+        first.append(time.process_time() - start)
     iterations, seconds = [], []
     for _ in range(steps):
         start = time.process_time()  # CPU time of this process: other jobs on the machine do not count
@@ -81,8 +87,10 @@ CHILD = textwrap.dedent('''
         start = time.process_time()
         matrix @ vector
         matvecs.append(time.process_time() - start)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     print(json.dumps({"nodes": model.node_count, "seconds": seconds, "iterations": float(np.mean(iterations)),
-                      "matvec": float(np.median(matvecs))}))
+                      "matvec": float(np.median(matvecs)), "first_extra": first[0] - seconds,
+                      "kib_per_node": (peak - resident) / model.node_count}))
 ''')
 
 
@@ -143,7 +151,8 @@ def main(argv=None) -> None:
         cases = [("beam", _beam_cells(n)) for n in args.nodes] + [("contact", args.contact_cells)]
         print(f"implicit Euler, dt = 0.01 s, median of {args.rounds} alternating runs of {args.steps} steps")
         print(f"{'scene':>8} {'nodes':>7} {args.ref + ' [ms]':>14} {'ours [ms]':>10} {'ratio':>6}"
-              f" {args.ref + ' [mv]':>14} {'ours [mv]':>10} {'ratio':>6} {'CG ' + args.ref:>10} {'CG ours':>8}")
+              f" {args.ref + ' [mv]':>14} {'ours [mv]':>10} {'ratio':>6} {'CG ' + args.ref:>10} {'CG ours':>8}"
+              f" {'build ' + args.ref:>13} {'build ours':>11} {'KiB/node ' + args.ref:>16} {'ours':>6}")
         for kind, cells in cases:
             measured = {"base": [], "ours": []}
             for _ in range(args.rounds):
@@ -153,9 +162,13 @@ def main(argv=None) -> None:
             mine = statistics.median(r["seconds"] for r in measured["ours"])
             base_mv = statistics.median(r["seconds"] / r["matvec"] for r in measured["base"])
             mine_mv = statistics.median(r["seconds"] / r["matvec"] for r in measured["ours"])
+            build = {name: statistics.median(r["first_extra"] / r["matvec"] for r in runs)
+                     for name, runs in measured.items()}
+            memory = {name: statistics.median(r["kib_per_node"] for r in runs) for name, runs in measured.items()}
             print(f"{kind:>8} {measured['ours'][0]['nodes']:>7} {1e3 * base:>14.2f} {1e3 * mine:>10.2f} "
                   f"{mine / base:>6.2f} {base_mv:>14.1f} {mine_mv:>10.1f} {mine_mv / base_mv:>6.2f} "
-                  f"{measured['base'][0]['iterations']:>10.1f} {measured['ours'][0]['iterations']:>8.1f}")
+                  f"{measured['base'][0]['iterations']:>10.1f} {measured['ours'][0]['iterations']:>8.1f}"
+                  f" {build['base']:>10.0f} mv {build['ours']:>8.0f} mv {memory['base']:>16.1f} {memory['ours']:>6.1f}")
 
 
 def _beam_cells(nodes: int) -> str:
