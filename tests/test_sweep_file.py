@@ -71,6 +71,14 @@ def test_a_sweep_file_is_the_same_sweep_as_its_flags(tmp_path, capsys):
     assert from_file == from_flags  # the same run ids, parameters and measured values, bit for bit
 
 
+def test_dotted_keys_and_inline_tables_in_set_name_key_paths(tmp_path):
+    # [set] integrator.dt = 0.05 sets the step, not the whole integrator table to {dt = 0.05}.
+    (tmp_path / "f.toml").write_text(f'scene = "{BEAM}"\n[set]\nintegrator.dt = 0.05\n'
+                                     '"bodies[0].material" = {E = 2e6}\n[grid]\nduration = [0.1]\n')
+    assert read_sweep_file(tmp_path / "f.toml").grid == {"integrator.dt": [0.05], "bodies[0].material.E": [2e6],
+                                                         "duration": [0.1]}
+
+
 def test_the_command_line_replaces_the_file_s_values_of_a_key_path(tmp_path, capsys):
     (tmp_path / "small.toml").write_text(SMALL)
     argv = [tmp_path / "small.toml", "--grid", "integrator.dt=0.03", "--random", "bodies[0].material.E=2e6:3e6",

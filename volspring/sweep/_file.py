@@ -10,6 +10,7 @@ given on the command line replaces the file's)::
 
     [set]                               # one value for every run, as --set
     duration = 1.5
+    integrator.dt = 0.02                # a dotted key (or an inline table) sets each key path it names
 
     [grid]                              # one run per combination, as --grid; a key path with brackets is quoted
     "bodies[0].model" = ["springs", "springs+volume", "smoothed"]
@@ -137,7 +138,7 @@ def read_sweep_file(path: str | os.PathLike[str]) -> SweepFile:
     for name in ("set", "grid", "random", "probes"):
         if not isinstance(table.get(name, {}), dict):
             raise SceneFileError(f"{name} is {type(table[name]).__name__}; expected a table ([{name}])")
-    grid = {key: [value] for key, value in table.get("set", {}).items()}
+    grid = {key: [value] for key, value in _flattened(table.get("set", {})).items()}
     for key, values in _flattened(table.get("grid", {})).items():
         if not isinstance(values, list):
             raise SceneFileError(f"grid.{_quoted(key)} = {values!r} is not a list of values; expected [v1, v2, ...]")
