@@ -1,19 +1,25 @@
 """report.html in a real browser: Debian's headless Chromium lays the page out at 760 and 1400 px and
 nothing may stick out sideways (wide tables scroll inside their wrapper) and every figure must decode.
 
-Slow (a --quick validation run, about 30 s, then two browser runs of a few seconds); skipped when no
-Chromium is installed (Debian: ``apt-get install chromium``). No browser-driver package: Chromium's own
-``--dump-dom`` prints the page after a small script, added to a copy of the report, has measured it.
+The report holds a user's sweep too (four runs of ``examples/scenes/beam_vs_fem.toml``), so the trade-curve
+section is laid out with the rest. Slow (a --quick validation run, about 30 s, then two browser runs of a few
+seconds); skipped when no Chromium is installed (Debian: ``apt-get install chromium``). No browser-driver
+package: Chromium's own ``--dump-dom`` prints the page after a small script, added to a copy of the report, has
+measured it.
 """
 
 import json
 import re
 import shutil
 import subprocess
+from pathlib import Path
 
 import pytest
 
 from validation.cli import main
+from validation.report import BUILT_IN, STUDIES
+
+SCENES = Path(__file__).resolve().parents[1] / "examples" / "scenes"
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome")
 CHROMIUM = next((found for found in map(shutil.which, BROWSERS) if found), None)
@@ -54,9 +60,19 @@ window.addEventListener('load', () => {
 
 @pytest.fixture(scope="module")
 def report(tmp_path_factory):
+    from volspring.sweep import run_sweep
+
+    # A small sweep of the compared beam too, so that the page holds a trade-curve section (its table and figure).
+    sweep = tmp_path_factory.mktemp("sweep")
+    run_sweep(SCENES / "beam_vs_fem.toml", {"bodies[0].size": [0.1], "duration": [0.3], "compare.cache": [False],
+                                            "bodies[0].model": ["springs", "smoothed"], "integrator.dt": [0.02, 0.05]},
+              sweep)
     out = tmp_path_factory.mktemp("report")
-    status = main(["--quick", "--out", str(out), "--cache", str(tmp_path_factory.mktemp("cache")), "--no-progress"])
+    # --sweep alone runs no case: name the quick run's cases and studies.
+    status = main([*BUILT_IN, *STUDIES, "--quick", "--out", str(out), "--cache", str(tmp_path_factory.mktemp("cache")),
+                   "--no-progress", "--sweep", str(sweep)])
     assert status == 0
+    assert "id='sweep_0'" in (out / "report.html").read_text(encoding="utf-8")
     return out / "report.html"
 
 
