@@ -95,10 +95,7 @@ def reference(name: str, problem: StaticProblem, **options: Any) -> Any:
     A comparison offers one as an attribute of its function, ``function.reference(problem, **options)``, and takes
     it back as ``function(problem, displacement, reference=..., **options)``.
     """
-    refusal = check_name(name)
-    if refusal is not None:
-        raise ValueError(f"comparison \"{name}\" {refusal}")
-    maker = getattr(available()[name].load(), "reference", None)
+    maker = getattr(_loaded(name), "reference", None)
     return None if maker is None else maker(problem, **options)
 
 
@@ -128,14 +125,19 @@ def compare(name: str, problem: StaticProblem, displacement: np.ndarray, *, refe
     ValueError
         For a name no installed package registers, or a displacement of another shape than the mesh's nodes.
     """
-    refusal = check_name(name)
-    if refusal is not None:
-        raise ValueError(f"comparison \"{name}\" {refusal}")
+    function = _loaded(name)
     displacement = np.asarray(displacement, dtype=np.float64)
     if displacement.shape != (problem.mesh.node_count, 3):
         raise ValueError(f"displacement has shape {displacement.shape}; expected ({problem.mesh.node_count}, 3), one "
                          "row per mesh node of the body")
-    function = available()[name].load()
     if reference is not None:
         options["reference"] = reference
     return dict(function(problem, displacement, **options))
+
+
+def _loaded(name: str) -> Any:
+    """The function of the installed comparison ``name``; ValueError naming what is installed otherwise."""
+    refusal = check_name(name)
+    if refusal is not None:
+        raise ValueError(f"comparison \"{name}\" {refusal}")
+    return available()[name].load()

@@ -255,14 +255,14 @@ def _run_on_cluster(client, runnable, base, measures, files, finish) -> list:
     shared = client.scatter([files], hash=False)[0] if files else None  # once, shared by every task
     # A [compare] reference (a FEM solve) is one task per distinct key; the runs that share it get its result, sent
     # to each worker once, instead of every run solving it again.
+    keys = {identifier: reference_key(scene) for identifier, scene in runnable.items()}
     references = {}
     for identifier, scene in runnable.items():
-        key = reference_key(scene)
-        if key is not None and key not in references:
-            references[key] = client.submit(_reference_task, scene, base=base, files=shared, pure=False,
-                                            key=f"volspring-reference-{identifier}")
+        if keys[identifier] is not None and keys[identifier] not in references:
+            references[keys[identifier]] = client.submit(_reference_task, scene, base=base, files=shared, pure=False,
+                                                         key=f"volspring-reference-{identifier}")
     calls = {identifier: (_run_task, (scene,), {"base": base, "measures": measures, "files": shared,
-                                                 "reference": references.get(reference_key(scene) or "")})
+                                                 "reference": references.get(keys[identifier])})
              for identifier, scene in runnable.items()}
     missing = []
     try:
