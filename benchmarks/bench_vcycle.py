@@ -12,6 +12,7 @@ Run (numpy/scipy threads are held to one before numpy is imported)::
 
     python benchmarks/bench_vcycle.py              # k = 12: about 10k nodes
     python benchmarks/bench_vcycle.py --cells 6 20
+    python benchmarks/bench_vcycle.py --smoother block_gauss_seidel gauss_seidel   # both, one after the other
 
 This is a script, not a test.
 """
@@ -29,6 +30,7 @@ import numpy as np  # noqa: E402
 from meshing import structured_box  # noqa: E402
 from volspring import Gravity, Material, Model, Pins, Scene  # noqa: E402
 from volspring.integrators.implicit import ImplicitEuler  # noqa: E402
+from volspring.solvers.amg import SMOOTHERS  # noqa: E402
 
 MATERIAL = Material(1e7, 0.45, 1000.0)
 DT = 0.01  # [s], the README's step
@@ -43,11 +45,11 @@ def per_call(function, seconds=0.3):
     return (time.process_time() - start) / count
 
 
-def measure(k: int, steps: int) -> None:
+def measure(k: int, steps: int, smoother: str) -> None:
     mesh = structured_box((5 * k, k, k), (1.0, 0.2, 0.2))
     model = Model.from_mesh(mesh, MATERIAL)
     scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
-    integrator = ImplicitEuler(timer=time.process_time)
+    integrator = ImplicitEuler(timer=time.process_time, smoother=smoother)
     state, rows = scene.initial_state(), []
     for _ in range(steps):
         start = time.process_time()
@@ -59,8 +61,8 @@ def measure(k: int, steps: int) -> None:
     ones = np.ones(matrix.shape[0])
     mv = per_call(lambda: matrix @ ones)
     step, forces, assembly, setup, solve, iterations = np.median(np.array(rows[3:]), axis=0)
-    print(f"\n{model.node_count} nodes (cells {5 * k} x {k} x {k}), one mat-vec {1e3 * mv:.3f} ms; median of "
-          f"{steps - 3} steps after 3:")
+    print(f"\n{model.node_count} nodes (cells {5 * k} x {k} x {k}), smoother {smoother}, one mat-vec "
+          f"{1e3 * mv:.3f} ms; median of {steps - 3} steps after 3 (the first step's AMG set-up {rows[0][3] / mv:.0f} mv):")
     print(f"  step {step / mv:.0f} mv = forces {forces / mv:.1f} + assembly {assembly / mv:.1f} + AMG set-up "
           f"{setup / mv:.1f} + solve {solve / mv:.1f} + the rest {(step - forces - assembly - setup - solve) / mv:.1f}")
     print(f"  solve: {iterations:.0f} CG iterations, {solve / iterations / mv:.1f} mv each")
@@ -86,9 +88,12 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cells", type=int, nargs="+", default=[12], help="k of the 5k x k x k cells")
     parser.add_argument("--steps", type=int, default=13, help="steps per size (the first 3 are not counted)")
+    parser.add_argument("--smoother", nargs="+", choices=SMOOTHERS, default=[SMOOTHERS[0]],
+                        help="the AMG smoothers to measure, one after the other at each size (default: %(default)s)")
     args = parser.parse_args()
     for k in args.cells:
-        measure(k, args.steps)
+        for smoother in args.smoother:
+            measure(k, args.steps, smoother)
 
 
 if __name__ == "__main__":

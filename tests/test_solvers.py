@@ -18,6 +18,7 @@ from meshing.geometry import rigid_body_modes
 from volspring import solvers
 from volspring.errors import SolverNotConverged
 from volspring.solvers import AMGConjugateGradient, DirectSolver, JacobiConjugateGradient, make_linear_solver
+from volspring.solvers.amg import SMOOTHERS
 
 
 def spring_system(cells, *, h_omega=50.0):
@@ -67,7 +68,7 @@ def test_spring_system_is_spd():
     assert np.linalg.eigvalsh(matrix)[0] >= 1.0 - 1e-9  # M + h^2 K with K >= 0 and M = I
 
 
-@pytest.mark.parametrize("smoother", ["gauss_seidel", "jacobi"])
+@pytest.mark.parametrize("smoother", SMOOTHERS)
 def test_v_cycle_adapter_equals_pyamg_public_preconditioner_bit_for_bit(system, rhs, smoother):
     matrix, modes, _ = system
     solver = AMGConjugateGradient(smoother=smoother)
@@ -80,6 +81,39 @@ def test_v_cycle_adapter_equals_pyamg_public_preconditioner_bit_for_bit(system, 
     y, iterations, _, _ = solvers.conjugate_gradient(matrix.__matmul__, rhs, preconditioner=public.matvec,
                                                      rtol=solver.rtol, maxiter=solver.maxiter)
     assert x.tobytes() == y.tobytes() and info.iterations == iterations
+
+
+@pytest.mark.parametrize("smoother", SMOOTHERS)
+def test_every_smoother_makes_a_symmetric_positive_definite_v_cycle(system, smoother):
+    """CG needs an SPD preconditioner: each forward sweep before the coarse correction is undone by a backward
+    one after it (point-wise on the finest level, by blocks below, for the default)."""
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient(smoother=smoother)
+    solver.build(matrix, modes)
+    u, v = np.random.default_rng(1).standard_normal((2, matrix.shape[0]))
+    # Symmetric to round-off: measured 1e-14 to 2e-14 relative on this system for the three smoothers.
+    assert np.dot(u, solver.precondition(v)) == pytest.approx(np.dot(v, solver.precondition(u)), rel=1e-10)
+    assert np.dot(u, solver.precondition(u)) > 0 and np.dot(v, solver.precondition(v)) > 0
+
+
+def test_default_smoother_sweeps_the_finest_level_point_wise_on_the_current_matrix(system, rhs):
+    """The default keeps the finest level as CSR (pyamg sweeps a BSR matrix by blocks, at 3.5 times the
+    cost of a point-wise sweep) holding the built matrix, and after refresh() the refreshed one."""
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient()
+    solver.build(matrix, modes)
+    finest = solver.hierarchy.levels[0].A
+    assert finest.format == "csr" and finest.has_sorted_indices and (finest != matrix).nnz == 0
+    assert all(level.A.format == "bsr" for level in solver.hierarchy.levels[1:])
+    stiffer = (matrix + sp.identity(matrix.shape[0], format="bsr")).tobsr(blocksize=(3, 3))
+    before = solver.precondition(rhs)
+    solver.refresh(stiffer)
+    finest = solver.hierarchy.levels[0].A
+    assert finest.format == "csr" and (finest != stiffer).nnz == 0
+    assert not np.array_equal(solver.precondition(rhs), before)
+    # A CG solve on the refreshed system reaches its target (the hierarchy below is the built one).
+    x, info = solver.solve(stiffer, rhs)
+    assert info.converged and np.linalg.norm(stiffer @ x - rhs) <= solver.rtol * np.linalg.norm(rhs)
 
 
 def test_v_cycle_adapter_falls_back_to_the_public_preconditioner_for_other_pyamg_versions(monkeypatch, system, rhs):

@@ -183,8 +183,8 @@ class ImplicitEuler(Integrator):
         clamp the transverse stiffness of compressed springs at 0
     on_failure : {"raise", "warn"}
         what a solve that stops short of ``rtol`` does
-    smoother : {"gauss_seidel", "jacobi"}
-        AMG smoother
+    smoother : {"gauss_seidel", "block_gauss_seidel", "jacobi"}
+        AMG smoother (:class:`~volspring.solvers.AMGConjugateGradient`)
     matrix_free : bool
         apply the sets that offer it as products (see the module docstring)
     timer : callable

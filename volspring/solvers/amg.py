@@ -18,10 +18,12 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
     from scipy import sparse
 
-__all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "PROLONGATION_OMEGA", "PYAMG_CYCLE_VERSIONS"]
+__all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "PROLONGATION_OMEGA", "PYAMG_CYCLE_VERSIONS", "SMOOTHERS"]
 
 logger = logging.getLogger(__name__)
 
+#: The V-cycle's smoothers (see :class:`AMGConjugateGradient`); the first is the default.
+SMOOTHERS = ("gauss_seidel", "block_gauss_seidel", "jacobi")
 #: Weight of the Jacobi prolongation smoother under row-wise Gershgorin weights (see
 #: :class:`AMGConjugateGradient`: why not pyamg's random-start spectral radius, and the measurements).
 PROLONGATION_OMEGA = 2.0
@@ -86,12 +88,19 @@ class AMGConjugateGradient(_LinearSolver):
     maxiter : int
         CG iteration cap.
     on_failure : {"raise", "warn"}
-    smoother : {"gauss_seidel", "jacobi"}
-        Block Gauss-Seidel (forward before, backward after the coarse correction, so the V-cycle
-        stays symmetric) or block Jacobi. Measured on a 10k-node beam: block Jacobi needs twice
-        the iterations; Chebyshev (degree 3, in A) saved one iteration in five at 10k but nothing
-        at 50k, and unlike Gauss-Seidel it is not invariant to the diagonal scaling that large
-        mass ratios bring, so it is not offered.
+    smoother : {"gauss_seidel", "block_gauss_seidel", "jacobi"}
+        Gauss-Seidel, forward before and backward after the coarse correction (so the V-cycle stays
+        symmetric): point-wise on the finest level and by 6x6 blocks below (``"gauss_seidel"``), by
+        blocks on every level (``"block_gauss_seidel"``), or block Jacobi. Why point-wise on the
+        finest level: pyamg's block sweep on the 3x3-block matrix costs 2.8 sparse mat-vecs, the
+        point-wise sweep on a CSR copy 0.8 (made once per build or :meth:`refresh`, and the finest
+        level's matrix in the hierarchy from then on), for the same CG
+        iterations on the README beam: a V-cycle 10.5 -> 6.4 mat-vecs at 10k nodes
+        (``python benchmarks/bench_vcycle.py --smoother block_gauss_seidel gauss_seidel`` prints the
+        steps of both). Point-wise on the 6x6-block coarse levels saved nothing. Block Jacobi needs
+        twice the iterations; Chebyshev (degree 3, in A) saved one iteration in five at 10k but
+        nothing at 50k, and unlike Gauss-Seidel it is not invariant to the diagonal scaling that
+        large mass ratios bring, so it is not offered.
     max_coarse : int
         Unknowns on the coarsest level (solved with sparse LU).
     strength_theta : float
@@ -163,8 +172,8 @@ class AMGConjugateGradient(_LinearSolver):
                  smoother: str = "gauss_seidel", max_coarse: int = 300, strength_theta: float = 0.05,
                  timer: Callable[[], float] = time.perf_counter):
         super().__init__(rtol=rtol, maxiter=maxiter, on_failure=on_failure, timer=timer)
-        if smoother not in ("gauss_seidel", "jacobi"):
-            raise ValueError(f"smoother = {smoother!r}, expected 'gauss_seidel' or 'jacobi'")
+        if smoother not in SMOOTHERS:
+            raise ValueError(f"smoother = {smoother!r}, expected one of {', '.join(map(repr, SMOOTHERS))}")
         self.smoother, self.max_coarse = smoother, int(max_coarse)
         self.strength_theta = float(strength_theta)
         self.build_count = 0
@@ -239,7 +248,7 @@ class AMGConjugateGradient(_LinearSolver):
         if self.strength_theta and hierarchy.operator_complexity() > 2.5:
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
             hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength="symmetric", **options)
-        if self.smoother != "gauss_seidel":
+        if self.smoother != "block_gauss_seidel":
             self._set_smoothers(hierarchy)
         cycle = _v_cycle(hierarchy)
         try:
@@ -253,10 +262,17 @@ class AMGConjugateGradient(_LinearSolver):
         self.build_count += 1
 
     def _set_smoothers(self, hierarchy) -> None:
-        """(Re)make every level's smoother from its current matrix (block Jacobi weighted by a bound per level)."""
+        """(Re)make the smoothers from the levels' current matrices: the finest level's point-wise sweeps, every
+        level's block sweeps, or block Jacobi weighted by a bound per level (``self.smoother``)."""
         from pyamg.relaxation.smoothing import change_smoothers
 
-        if self.smoother == "gauss_seidel":
+        finest = hierarchy.levels[0]
+        if self.smoother == "gauss_seidel":  # the coarse levels keep the block sweeps of the build
+            if finest.A.format == "bsr":  # a CSR finest level (two-level cycles) already sweeps point-wise
+                finest.A = _scalar_copy(finest.A)
+                finest.presmoother, finest.postsmoother = _point_gauss_seidel()
+            return
+        if self.smoother == "block_gauss_seidel":
             pre, post = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
             change_smoothers(hierarchy, [pre], [post])
             return
@@ -354,6 +370,29 @@ class AMGConjugateGradient(_LinearSolver):
         info = SolveInfo("amg", iterations, residual, bool(residual <= self.rtol), self.rtol, initial,
                          setup, self.timer() - start, rebuilt)
         return self._finish(x, info)
+
+
+def _scalar_copy(matrix) -> sp.csr_matrix:
+    """``matrix`` in CSR form with sorted indices (the point-wise sweeps' format; it replaces the BSR copy of the
+    finest level in the hierarchy, so the cycle's residuals use it too and the memory grows by 3.5 bytes per
+    nonzero, not by a second copy)."""
+    scalar = sp.csr_matrix(matrix)
+    scalar.sort_indices()
+    return scalar
+
+
+def _point_gauss_seidel() -> tuple[Callable, Callable]:
+    """pyamg smoothers ``(A, x, b) -> None`` for a CSR level: one forward and one backward point-wise Gauss-Seidel
+    sweep (pyamg's own, which on a BSR matrix would sweep by blocks)."""
+    from pyamg.relaxation.relaxation import gauss_seidel
+
+    def forward(A, x, b):
+        gauss_seidel(A, x, b, iterations=1, sweep="forward")
+
+    def backward(A, x, b):
+        gauss_seidel(A, x, b, iterations=1, sweep="backward")
+
+    return forward, backward
 
 
 def _block_jacobi_bound(matrix) -> float:
