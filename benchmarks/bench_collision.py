@@ -25,6 +25,15 @@ Published figures to compare with (Pentium 4 1.8 GHz, 2003): detection 4.3 / 30.
 1k / 10k / 20k / 50k tets ("paper ms": scaled linearly from the nearest published size); depths
 ~35 us per colliding point (2004).
 
+With ``--levers`` it then measures, per size and in the same run, each speed-up of issue 15 against the
+code it replaced (put back for the measurement), alternating the two, best of ``--repeat``:
+
+- ``dense grid, vertex-in-tet``: ``detect``, pairs from the dense grid (``spatial_hash.box_pairs``) against the
+  hash of :class:`~volspring.collision.spatial_hash.SpatialHash` (binary searches per cell of every tet box);
+- ``dense grid, edge-surface``: ``depth``, the same for the edge-triangle search of the border points;
+- ``shared csr pattern``: ``jacobian``, one pattern for dF/dx and dF/dv (``penalty._StencilPattern``) against two
+  ``csr_matrix((data, (rows, cols)))`` conversions.
+
 Run: ``OMP_NUM_THREADS=1 python benchmarks/bench_collision.py`` (``--sizes 1000 20000`` to choose).
 """
 
@@ -41,6 +50,7 @@ from volspring import Material, Model
 from volspring.assembly import stiffness_matrix
 from volspring.bodies import Body
 from volspring.collision import ContactForce, consistent_penetration_depths, detect_collisions
+from volspring.collision import penalty, penetration, spatial_hash
 from volspring.collision.tet_tet import crossing_tet_pairs, edge_crossing_contacts
 
 PUBLISHED_DETECTION_MS = {1_000: 4.3, 10_000: 30.4, 20_000: 70.0, 50_000: 172.5}
@@ -67,11 +77,60 @@ def best_time(function, repeat):
     return min(times), result
 
 
+def hashed_pairs(item_lo, item_hi, query_lo, query_hi, *, cell_size, table_size=spatial_hash.DEFAULT_TABLE_SIZE,
+                 item_group=None, query_group=None, rule="all"):
+    """The box pairs as before issue 15: the sorted hash, binary searches per query cell."""
+    grid = spatial_hash.SpatialHash.build(item_lo, item_hi, cell_size=cell_size, table_size=table_size,
+                                          item_group=item_group)
+    return grid.query(query_lo, query_hi, query_group=query_group, rule=rule)
+
+
+class ConvertedPattern:
+    """The Jacobian's matrices as before issue 15: each one its own csr_matrix((data, (rows, cols)))."""
+
+    def __init__(self, nodes, weights, node_count):
+        self.nodes, self.weights, self.node_count = nodes, weights, node_count
+
+    def matrix(self, blocks):
+        return penalty._stencil_matrix(self.nodes, self.weights, blocks, self.node_count)
+
+
+def lever_times(contact, model, x, v, hits, repeat):
+    """``{lever: (before, after)}`` [s], the variants alternated in one loop (best of ``repeat`` each)."""
+    bodies = contact.bodies
+    levers = {
+        "dense grid, vertex-in-tet": (spatial_hash, "box_pairs", hashed_pairs,
+                                      lambda: detect_collisions(bodies, x)),
+        "dense grid, edge-surface": (penetration, "box_pairs", hashed_pairs,
+                                     lambda: consistent_penetration_depths(bodies, x, hits)),
+        "shared csr pattern": (penalty, "_StencilPattern", ConvertedPattern,
+                               lambda: contact.jacobian(model, x, v, 0.0)),
+    }
+    times = {}
+    for name, (module, attribute, before, function) in levers.items():
+        after = getattr(module, attribute)
+        best = {"before": np.inf, "after": np.inf}
+        for _ in range(repeat):
+            for variant, value in (("before", before), ("after", after)):
+                setattr(module, attribute, value)
+                try:
+                    start = time.perf_counter()
+                    function()
+                    best[variant] = min(best[variant], time.perf_counter() - start)
+                finally:
+                    setattr(module, attribute, after)
+        times[name] = (best["before"], best["after"])
+    return times
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[1_000, 10_000, 50_000], help="total tets")
     parser.add_argument("--repeat", type=int, default=5, help="timed runs per size (the best is kept)")
+    parser.add_argument("--levers", action="store_true",
+                        help="also time issue 15's speed-ups against what they replaced")
     args = parser.parse_args(argv)
+    lever_rows = []
     print(f"{'tets':>7} {'nodes':>7} {'contacts':>8} {'detect ms':>9} {'paper ms':>8} {'depth ms':>8} "
           f"{'force ms':>8} {'jacobian ms':>11} {'us/contact':>10} {'SpMV ms':>8} {'step/SpMV':>9} "
           f"{'pairs':>7} {'tet-tet ms':>10} {'tet-tet/detect':>14} {'edges ms':>8} {'edges/detect':>12}")
@@ -106,7 +165,14 @@ def main(argv=None) -> int:
               f"{1e6 * step / max(found.count, 1):>10.1f} {1e3 * spmv:>8.3f} {step / spmv:>9.0f} "
               f"{pairs.count:>7} {1e3 * tet_tet:>10.2f} {tet_tet / detect:>14.1f} "
               f"{1e3 * edges:>8.2f} {edges / detect:>12.1f}")
+        if args.levers:
+            lever_rows += [(bodies.tet_count, name, before, after)
+                           for name, (before, after) in lever_times(contact, model, x, v, hits, args.repeat).items()]
     print("force = detection + depths + penalty/damping/friction; step = force + jacobian")
+    if lever_rows:
+        print(f"\n{'tets':>7} {'lever':<26} {'before ms':>9} {'after ms':>8} {'after/before':>12}")
+        for tets, name, before, after in lever_rows:
+            print(f"{tets:>7} {name:<26} {1e3 * before:>9.2f} {1e3 * after:>8.2f} {after / before:>12.2f}")
     return 0
 
 

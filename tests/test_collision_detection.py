@@ -195,3 +195,38 @@ def test_open_mesh_bowl_band_and_rim():
     assert contacts.vertex.tolist() == [0, 1]
     np.testing.assert_allclose(contacts.depth, [0.05, 0.05], atol=1e-12)
     np.testing.assert_allclose(contacts.direction, [[0, 0, 1], [-1, 0, 0]], atol=1e-12)
+
+
+@pytest.mark.parametrize("table_size", [1, 5, 2_147_483_647])  # 1 and 5 are below the grid's cells: the hash
+@pytest.mark.parametrize("rule", ["all", "other", "same"])
+@pytest.mark.parametrize("points", [False, True])
+def test_dense_grid_pairs_equal_the_hash(table_size, rule, points):
+    from volspring.collision.spatial_hash import box_pairs
+
+    rng = np.random.default_rng(4)
+    lo_a = rng.uniform(-1, 1, (200, 3))
+    hi_a = lo_a + rng.uniform(0, 0.8, (200, 3))
+    lo_b = rng.uniform(-1, 1, (300, 3))
+    hi_b = lo_b if points else lo_b + rng.uniform(0, 0.8, (300, 3))  # boxes span several cells, points one
+    group_a, group_b = rng.integers(0, 3, 200), rng.integers(0, 3, 300)
+    query, item = box_pairs(lo_b, hi_b, lo_a, hi_a, cell_size=0.4, table_size=table_size, item_group=group_b,
+                            query_group=group_a, rule=rule)
+    grid = SpatialHash.build(lo_b, hi_b, cell_size=0.4, table_size=table_size, item_group=group_b)
+    expected = grid.query(lo_a, hi_a, query_group=group_a, rule=rule)
+    assert len(expected[0]) > 50, "the boxes must overlap for the comparison to mean anything"
+    assert sorted(zip(query.tolist(), item.tolist())) == sorted(zip(*(e.tolist() for e in expected)))
+    if rule == "same":  # the same order too: the depths keep the first of equally deep surface hits
+        np.testing.assert_array_equal(query, expected[0])
+        np.testing.assert_array_equal(item, expected[1])
+
+
+def test_dense_grid_falls_back_to_the_hash_for_scattered_items(monkeypatch):
+    from volspring.collision import spatial_hash
+
+    # Two points 10^4 cells apart: a dense grid would need 10^12 cells, so the hash answers.
+    items = np.array([[0.0, 0.0, 0.0], [1e3, 1e3, 1e3]])
+    built, build = [], SpatialHash.build.__func__
+    monkeypatch.setattr(spatial_hash.SpatialHash, "build",
+                        classmethod(lambda cls, *a, **k: built.append(1) or build(cls, *a, **k)))
+    query, item = spatial_hash.box_pairs(items, items, items - 0.05, items + 0.05, cell_size=0.1)
+    assert built and query.tolist() == [0, 1] and item.tolist() == [0, 1]

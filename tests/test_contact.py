@@ -555,3 +555,20 @@ def test_amg_with_the_contact_jacobian_in_the_hierarchy_matches_a_direct_solve_a
         uninterrupted = integrator.step(scene, uninterrupted, dt)
         resumed = fresh.step(scene, resumed, dt)
     assert np.array_equal(resumed.x, uninterrupted.x) and np.array_equal(resumed.v, uninterrupted.v)
+
+
+@pytest.mark.parametrize("width", [1, 5])
+def test_shared_jacobian_pattern_equals_the_csr_conversion_bit_for_bit(width):
+    from volspring.collision.penalty import _StencilPattern, _stencil_matrix
+
+    rng = np.random.default_rng(2)
+    nodes = rng.integers(0, 30, (400, width))  # 30 nodes: many stencils share nodes, so entries are summed
+    weights = rng.normal(size=(400, width))
+    weights[rng.random(weights.shape) < 0.2] = -0.0  # zero weights make -0.0 terms, whose sum keeps its sign
+    pattern = _StencilPattern(nodes, weights, 40)  # 10 nodes in no stencil: empty rows
+    for blocks in rng.normal(size=(2, 400, 3, 3)):
+        expected, got = _stencil_matrix(nodes, weights, blocks, 40), pattern.matrix(blocks)
+        np.testing.assert_array_equal(got.indptr, expected.indptr)
+        np.testing.assert_array_equal(got.indices, expected.indices)
+        # Bit for bit, -0.0 included: the same terms added in the same order (exact, no tolerance).
+        np.testing.assert_array_equal(got.data.view(np.int64), expected.data.view(np.int64))

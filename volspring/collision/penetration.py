@@ -39,7 +39,7 @@ import numpy as np
 from meshing.geometry import area_weighted_vertex_normals, nearest_surface_points
 from meshing.tolerances import CANCELLED, ON_SURFACE
 from volspring.collision.bodies import CollisionBodies
-from volspring.collision.spatial_hash import DEFAULT_TABLE_SIZE, SpatialHash, VertexTetContacts, expand_ranges
+from volspring.collision.spatial_hash import DEFAULT_TABLE_SIZE, VertexTetContacts, box_pairs, expand_ranges
 from volspring.collision.triangles import segment_triangle_intersections
 from typing import TYPE_CHECKING
 
@@ -203,9 +203,8 @@ def _edge_surface_hits(bodies, x, start_vertex, end_vertex, body, *, cell_size, 
     near = np.isin(face_body, np.unique(body))
     near &= ((face_lo <= seg_hi.max(axis=0)) & (face_hi >= seg_lo.min(axis=0))).all(axis=1)
     candidates = np.flatnonzero(near)
-    grid = SpatialHash.build(face_lo[candidates], face_hi[candidates], cell_size=cell_size,
-                             table_size=table_size, item_group=face_body[candidates])
-    segment, local = grid.query(seg_lo, seg_hi, query_group=body, rule="same")
+    segment, local = box_pairs(face_lo[candidates], face_hi[candidates], seg_lo, seg_hi, cell_size=cell_size,
+                               table_size=table_size, item_group=face_body[candidates], query_group=body, rule="same")
     face = candidates[local]
     # A self-collision edge starts or ends on its own body's surface: those faces are not crossings.
     incident = ((faces[face] == start_vertex[segment, None]) | (faces[face] == end_vertex[segment, None])).any(1)

@@ -4,7 +4,10 @@ The hash table of the paper is replaced by a sort: every item (a vertex, a trian
 in each grid cell its bounding box covers, under the key ``hash(cell) * G + group``; the keys are
 sorted once, and a query box looks up each of its cells with two binary searches. Cells whose
 hashes collide share a key range, so every candidate is checked against its real cell before any
-geometric test: a tiny table is slow, never wrong. The geometric test is the barycentric inside test of
+geometric test: a tiny table is slow, never wrong. When the grid over the items' cells is small (a
+few cells per entry, and no more than the table size), vertex-in-tet detection and the depths'
+edge-surface search use that grid itself as a table without collisions (:func:`box_pairs`): one
+lookup per column of a query's cells. The geometric test is the barycentric inside test of
 :func:`meshing.geometry.barycentric_frames`, the one anchoring uses too.
 """
 
@@ -22,7 +25,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ["HASH_PRIMES", "DEFAULT_TABLE_SIZE", "SpatialHash", "VertexTetContacts", "cell_hash", "detect_collisions"]
+__all__ = ["HASH_PRIMES", "DEFAULT_TABLE_SIZE", "SpatialHash", "VertexTetContacts", "box_pairs", "cell_hash",
+           "detect_collisions"]
 
 logger = logging.getLogger(__name__)
 
@@ -192,6 +196,103 @@ class SpatialHash:
         return q[overlap], item[overlap]
 
 
+# A dense grid over the items' cells replaces the hash when it has at most this many cells per entry (times
+# the groups), plus a floor for tiny sets: its memory and its one pass over the cells stay O(entries).
+_DENSE_CELLS_PER_ENTRY = 8
+_DENSE_CELLS_FLOOR = 4096
+
+
+def box_pairs(item_lo: np.ndarray, item_hi: np.ndarray, query_lo: np.ndarray, query_hi: np.ndarray, *,
+             cell_size: float, table_size: int = DEFAULT_TABLE_SIZE, item_group: np.ndarray | None = None,
+             query_group: np.ndarray | None = None, rule: str = "all") -> tuple[np.ndarray, np.ndarray]:
+    """All overlapping (query, item) box pairs: ``SpatialHash.build(item_lo, item_hi, ...).query(query_lo, ...)``.
+
+    The same pairs, each once, in the same order for ``rule="same"`` (by query, then by the cell at the low
+    corner of the two boxes' overlap, then by item); for ``"other"`` and ``"all"`` with several groups, by
+    query and group first. When the grid over the items' cells fits in ``table_size`` buckets (and in a few
+    cells per entry), that grid is the table, without collisions: an entry's key is ``group * cells + cell``,
+    the cells numbered along z fastest, so the entries of one group in one (x, y) column of a query's cells are
+    one run of the sorted keys, read from a cumulative count: two lookups per column instead of binary
+    searches per cell. Otherwise the hash is used.
+
+    Parameters
+    ----------
+    item_lo, item_hi : (k, 3) float
+        item boxes [m]
+    query_lo, query_hi : (q, 3) float
+        query boxes [m]
+    cell_size : float
+        grid cell edge [m]
+    table_size : int
+        hash buckets; the dense grid is used only if it has no more cells than this
+    item_group, query_group : (k,) and (q,) int, optional
+        group of each box (default 0)
+    rule : {"all", "other", "same"}
+        as for :meth:`SpatialHash.query`
+
+    Returns
+    -------
+    (query, item) : two (p,) int64 arrays
+    """
+    if rule not in _GROUP_RULES:
+        raise ValueError(f"rule = {rule!r} is not one of {_GROUP_RULES}")
+    if cell_size is None or not np.isfinite(cell_size) or cell_size <= 0:
+        raise ValueError(f"cell_size = {cell_size} is not a positive length")
+    table_size = _check_table_size(table_size)
+    item_group = np.zeros(len(item_lo), dtype=np.int64) if item_group is None else np.asarray(item_group, np.int64)
+    query_group = np.zeros(len(query_lo), dtype=np.int64) if query_group is None else np.asarray(query_group, np.int64)
+    if len(item_lo) == 0 or len(query_lo) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    item_cell_lo = np.floor(item_lo / cell_size).astype(np.int64)
+    item_cell_hi = item_cell_lo if item_hi is item_lo else np.floor(item_hi / cell_size).astype(np.int64)
+    corner = item_cell_lo.min(axis=0)
+    size = item_cell_hi.max(axis=0) - corner + 1
+    group_count = int(max(item_group.max(), query_group.max())) + 1
+    cells = int(np.prod(size))
+    item_cell_lo, item_cell_hi = item_cell_lo - corner, item_cell_hi - corner
+    single = item_hi is item_lo or bool((item_cell_lo == item_cell_hi).all())  # a pair then meets in one cell
+    owner, entry_cell = (np.arange(len(item_lo)), item_cell_lo) if single else _box_cells(item_cell_lo, item_cell_hi)
+    if group_count * cells > min(table_size, _DENSE_CELLS_PER_ENTRY * len(owner) + _DENSE_CELLS_FLOOR):
+        grid = SpatialHash.build(item_lo, item_hi, cell_size=cell_size, table_size=table_size, item_group=item_group)
+        return grid.query(query_lo, query_hi, query_group=query_group, rule=rule)
+    key = item_group[owner] * cells + (entry_cell[:, 0] * size[1] + entry_cell[:, 1]) * size[2] + entry_cell[:, 2]
+    order = np.argsort(key, kind="stable")
+    entry_item, entry_cell = owner[order], entry_cell[order]
+    start = np.zeros(group_count * cells + 1, dtype=np.int64)
+    np.cumsum(np.bincount(key, minlength=group_count * cells), out=start[1:])
+    # The queries' cell ranges, clipped to the grid (no item lies outside it).
+    lo = np.maximum(np.floor(query_lo / cell_size).astype(np.int64) - corner, 0)
+    hi = np.minimum(np.floor(query_hi / cell_size).astype(np.int64) - corner, size - 1)
+    span = hi - lo + 1
+    query = np.flatnonzero(_all3(span > 0))
+    # One row per (query, group searched): its own group, the others, or all of them.
+    if rule == "same":
+        group = query_group[query]
+    else:
+        searched = group_count - 1 if rule == "other" else group_count
+        query = np.repeat(query, searched)
+        shift = np.tile(np.arange(searched), len(query) // max(searched, 1))
+        group = (query_group[query] + 1 + shift) % group_count if rule == "other" else shift
+    # One row per (query, group, column of its cells along z), the entries of the column one run.
+    row_query, column = expand_ranges(np.zeros(len(query), dtype=np.int64), span[query, 0] * span[query, 1])
+    query, group = query[row_query], group[row_query]
+    i = lo[query, 0] + column // span[query, 1]
+    j = lo[query, 1] + column % span[query, 1]
+    first_key = group * cells + (i * size[1] + j) * size[2] + lo[query, 2]
+    first = start[first_key]
+    row, entry = expand_ranges(first, start[first_key + span[query, 2]] - first)
+    query, item = query[row], entry_item[entry]
+    for axis in range(3) if not single else ():  # one coordinate at a time, each on the survivors of the last
+        # Report a pair only in the cell at the low corner of the overlap of the two cell ranges.
+        keep = entry_cell[:, axis][entry] == np.maximum(lo[:, axis][query], item_cell_lo[:, axis][item])
+        query, item, entry = query[keep], item[keep], entry[keep]
+    for axis in range(3):
+        overlap = item_lo[:, axis][item] <= query_hi[:, axis][query]
+        overlap &= item_hi[:, axis][item] >= query_lo[:, axis][query]
+        query, item = query[overlap], item[overlap]
+    return query, item
+
+
 @dataclass(frozen=True, eq=False)
 class VertexTetContacts:
     """Vertices found inside tets, sorted by (vertex, tet); all ids global (see CollisionBodies).
@@ -284,10 +385,10 @@ def detect_collisions(bodies: CollisionBodies, positions: ArrayLike, *, cell_siz
         active_tet = _all3((tet_hi >= others_lo[tb]) & (tet_lo <= others_hi[tb]))
     vertices = np.flatnonzero(active_vertex)
     tets = np.flatnonzero(active_tet)
-    grid = SpatialHash.build(x[vertices], x[vertices], cell_size=cell_size, table_size=table_size,
-                             item_group=bodies.node_body[vertices])
-    local_tet, local_vertex = grid.query(tet_lo[tets], tet_hi[tets], query_group=bodies.tet_body[tets],
-                                         rule="all" if self_collision else "other")
+    points = x[vertices]
+    local_tet, local_vertex = box_pairs(points, points, tet_lo[tets], tet_hi[tets], cell_size=cell_size,
+                                       table_size=table_size, item_group=bodies.node_body[vertices],
+                                       query_group=bodies.tet_body[tets], rule="all" if self_collision else "other")
     tet, vertex = tets[local_tet], vertices[local_vertex]
     if self_collision:
         own = (bodies.tets[tet] == vertex[:, None]).any(axis=1)
