@@ -75,6 +75,10 @@ __all__ = ["ImplicitEuler", "ImplicitStepInfo", "SolverCache"]
 logger = logging.getLogger(__name__)
 
 _KEY = "implicit_euler."
+#: The scene forces' Jacobian (contact) must reach more than this share of the unknowns beyond what it reached at
+#: the last build, besides growing or shrinking by ``rebuild_growth``, to rebuild the AMG hierarchy: a resting
+#: contact flickering between no and a few contacts does not rebuild every step (``benchmarks/bench_contact_cg.py``).
+CONTACT_REBUILD_SHARE = 0.01
 
 
 @dataclass(frozen=True)
@@ -130,6 +134,8 @@ class _System:
     held_rhs: np.ndarray | None = None  # (3f,) what the held values put into the right-hand side (0 on held rows)
     operator: LinearOperator | None = None  # the sets applied as products (held unknowns masked), or None
     preconditioner_matrix: Callable[[], sp.bsr_matrix] | None = None  # () -> the matrix with their stand-in blocks
+    folded: np.ndarray | None = None  # (f, 3) the scene forces' diagonal Jacobian term, folded into the matrix
+    touched: int = 0  # free unknowns on which the scene forces' Jacobian has a row (contact's grow and shrink)
 
     def with_held(self, b) -> np.ndarray:
         """The right-hand side ``b`` with the held unknowns' rows set (see :func:`eliminate_held`)."""
@@ -277,18 +283,21 @@ class ImplicitEuler(Integrator):
         clock = self.timer()
         dfdx, dfdv = scene.external_jacobian(x, v, t)
         diagonal = scene.model.masses[pattern.free_nodes]
-        extra = extra_full = None
+        extra = extra_full = folded = None
+        touched = 0
         if dfdx is not None or dfdv is not None:
             terms = [-h * dfdv if dfdv is not None else None, -h * h * dfdx if dfdx is not None else None]
             extra_full = sp.csr_matrix(sum(term for term in terms if term is not None))
             dofs = pattern.free_dofs()
             restricted = extra_full[dofs][:, dofs].tocoo()
+            touched = len(np.unique(restricted.row))
             if (restricted.row == restricted.col).all():
                 # A diagonal term (e.g. drag) is folded into the diagonal blocks, so the AMG
                 # hierarchy sees it too and CG pays nothing extra.
                 folded = np.zeros(pattern.size)
                 np.add.at(folded, restricted.row, restricted.data)
-                diagonal = diagonal[:, None] + folded.reshape(-1, 3)
+                folded = folded.reshape(-1, 3)
+                diagonal = diagonal[:, None] + folded
             else:
                 extra = restricted.tocsr()
         matrix = pattern.matrix(springs, diagonal)
@@ -312,7 +321,7 @@ class ImplicitEuler(Integrator):
             held_rhs = np.where(held, 0.0, -coupling)
         return _System(matrix, extra, springs, forces, self.timer() - clock, extra_full,
                        None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs, operator,
-                       None if operator is None else preconditioner)
+                       None if operator is None else preconditioner, folded, touched)
 
     def linear_system(self, scene: Scene, state: State,
                       dt: float) -> tuple[sparse.spmatrix, sparse.spmatrix | None, BlockPattern]:
@@ -335,8 +344,9 @@ class ImplicitEuler(Integrator):
         return system.matrix, system.extra, pattern
 
     # ------------------------------------------------------------------ hierarchy policy
-    def _needs_rebuild(self, memory, pattern, step, dt) -> str:
-        """Why the hierarchy must be rebuilt at the start of this step ('' when it need not)."""
+    def _needs_rebuild(self, memory, pattern, step, dt, touched=0) -> str:
+        """Why the hierarchy must be rebuilt at the start of this step ('' when it need not); ``touched``: the free
+        unknowns the scene forces' Jacobian reaches in this step (:attr:`_System.touched`)."""
         if _KEY + "amg_step" not in memory:
             return "first build"
         if memory[_KEY + "amg_x"].shape != (pattern.model.node_count, 3) or \
@@ -349,6 +359,12 @@ class ImplicitEuler(Integrator):
             return f"every {self.rebuild_every} steps"
         if not 0.8 <= dt / float(memory[_KEY + "amg_dt"]) <= 1.25:
             return f"dt changed from {float(memory[_KEY + 'amg_dt']):.3g} s to {dt:.3g} s"
+        # Contact starting, ending, spreading or receding: a hierarchy built without the contact stiffness (or
+        # with contact that is gone) preconditions poorly even with its finest level refreshed.
+        at_build = int(memory.get(_KEY + "amg_touched", 0))
+        grown = touched > self.rebuild_growth * at_build or at_build > self.rebuild_growth * touched
+        if grown and abs(touched - at_build) > CONTACT_REBUILD_SHARE * pattern.size:
+            return f"the scene forces' Jacobian reaches {touched} unknowns, {at_build} at the build"
         return ""
 
     def _build(self, cache, pattern, system, x, step, t, dt, v):
@@ -359,6 +375,7 @@ class ImplicitEuler(Integrator):
         # The stand-in blocks of sets applied as products cost a linearisation of their own: kept from the build
         # for the contact refreshes of the steps that reuse this hierarchy (_solve).
         cache.stand_in = system.stand_in if system.operator is not None else None
+        cache.folded = system.folded
         return seconds
 
     # ------------------------------------------------------------------ the step
@@ -395,14 +412,15 @@ class ImplicitEuler(Integrator):
 
         setup_seconds, rebuilt = 0.0, False
         if self.method == "amg" and pattern.size:
-            reason = self._needs_rebuild(memory, pattern, state.step, h)
+            reason = self._needs_rebuild(memory, pattern, state.step, h, system.touched)
             if reason:
                 logger.debug("step %d: rebuilding the AMG hierarchy (%s)", state.step, reason)
                 setup_seconds = self._build(cache, pattern, system, x0, state.step, t0, h, v0)
                 rebuilt = True
                 memory.update({_KEY + "amg_step": int(state.step), _KEY + "amg_t": float(t0),
                                _KEY + "amg_size": int(pattern.size),
-                               _KEY + "amg_dt": h, _KEY + "amg_x": x0.copy(), _KEY + "amg_v": v0.copy()})
+                               _KEY + "amg_dt": h, _KEY + "amg_x": x0.copy(), _KEY + "amg_v": v0.copy(),
+                               _KEY + "amg_touched": system.touched})
             elif not cache.matches(pattern, memory[_KEY + "amg_step"], memory[_KEY + "amg_t"],
                                    memory[_KEY + "amg_dt"], memory[_KEY + "amg_x"], memory[_KEY + "amg_v"]):
                 # Resumed from a checkpoint (or a new or unpickled cache): rebuild the hierarchy
@@ -467,12 +485,27 @@ class ImplicitEuler(Integrator):
         return State(x1, v1, t0 + h, state.step + 1, memory)
 
     def _solve(self, cache, system, b, warm):
-        if system.extra is not None and self.method == "amg":
+        if self.method == "amg":
             # Contact changes from step to step: the fine level of the kept hierarchy gets the current
-            # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay. With sets
-            # applied as products, their stand-in blocks are those of the hierarchy's build.
-            if system.operator is not None and cache.stand_in is not None:
-                cache.solver.refresh(sp.bsr_matrix(cache.stand_in + system.extra, blocksize=(3, 3)))
+            # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay; so does a diagonal
+            # term (a rigid obstacle's contact) that differs from the build's. With sets applied as products, their
+            # stand-in blocks are those of the hierarchy's build. Otherwise the finest level is the built matrix
+            # (restore), so that a step's preconditioner depends on the build and the step only, as in a resumed run.
+            folded = system.folded if system.folded is not None else 0.0
+            built = cache.folded if cache.folded is not None else 0.0
+            if system.extra is not None or not np.array_equal(folded, built):
+                if system.operator is not None and cache.stand_in is not None:
+                    stand_in = sp.csr_matrix(cache.stand_in)
+                    if system.extra is not None:
+                        stand_in = stand_in + system.extra
+                    change = np.broadcast_to(np.subtract(folded, built), (len(b) // 3, 3)).ravel()
+                    if system.held is not None:  # eliminated rows stay identity rows
+                        change = np.where(system.held, 0.0, change)
+                    if change.any():
+                        stand_in = stand_in + sp.diags(change)
+                    cache.solver.refresh(sp.bsr_matrix(stand_in, blocksize=(3, 3)))
+                else:
+                    cache.solver.refresh(system.whole)
             else:
-                cache.solver.refresh(system.whole)
+                cache.solver.restore()
         return cache.solver.solve(system.matrix, b, x0=warm, extra=system.products)

@@ -76,6 +76,9 @@ class _Source:
     matrix: sp.spmatrix           # frozen copy of the fine matrix
     near_null_space: np.ndarray   # (N, k) or, with a prolongation, (n, k)
     prolongation: sp.spmatrix | None = None  # (N, n): coarse space of a two-level cycle
+    # With the point-wise smoother: ``matrix`` is the CSR form of a BSR matrix of this block size, and also the
+    # hierarchy's finest level (one copy; pyamg aggregates a BSR form of it by blocks).
+    blocksize: tuple[int, int] | None = None
 
 
 class AMGConjugateGradient(_LinearSolver):
@@ -93,14 +96,15 @@ class AMGConjugateGradient(_LinearSolver):
         symmetric): point-wise on the finest level and by 6x6 blocks below (``"gauss_seidel"``), by
         blocks on every level (``"block_gauss_seidel"``), or block Jacobi. Why point-wise on the
         finest level: pyamg's block sweep on the 3x3-block matrix costs 2.8 sparse mat-vecs, the
-        point-wise sweep on a CSR copy 0.8 (made once per build or :meth:`refresh`, and the finest
-        level's matrix in the hierarchy from then on), for the same CG
-        iterations on the README beam: a V-cycle 10.5 -> 6.4 mat-vecs at 10k nodes
+        point-wise sweep on a CSR copy 0.8, for the same CG iterations on the README beam: a V-cycle
+        10.5 -> 6.4 mat-vecs at 10k nodes
         (``python benchmarks/bench_vcycle.py --smoother block_gauss_seidel gauss_seidel`` prints the
         steps of both). Point-wise on the 6x6-block coarse levels saved nothing. Block Jacobi needs
         twice the iterations; Chebyshev (degree 3, in A) saved one iteration in five at 10k but
         nothing at 50k, and unlike Gauss-Seidel it is not invariant to the diagonal scaling that
-        large mass ratios bring, so it is not offered.
+        large mass ratios bring, so it is not offered. With the point-wise sweeps the kept copy of the
+        built matrix is that CSR copy, which is also the finest level of the hierarchy (pyamg aggregates a
+        BSR form of it made for the build): one copy, 3.5 bytes per nonzero more than the BSR one.
     max_coarse : int
         Unknowns on the coarsest level (solved with sparse LU).
     strength_theta : float
@@ -180,6 +184,7 @@ class AMGConjugateGradient(_LinearSolver):
         self._source: _Source | None = None  # what the hierarchy is built from (pickled)
         self._hierarchy: Any = None  # pyamg MultilevelSolver (not pickled)
         self._cycle: Callable[[np.ndarray], np.ndarray] | None = None  # r -> z, one V-cycle of it (not pickled)
+        self._refreshed = False  # the finest level holds a refresh()'s matrix, not the built one
 
     @property
     def hierarchy(self) -> Any:
@@ -218,8 +223,11 @@ class AMGConjugateGradient(_LinearSolver):
         # Canonical (sorted, summed) up front: pyamg sorts the indices in place, and a hierarchy rebuilt
         # from the sorted matrix (after unpickling) would otherwise differ from one built before.
         frozen.sum_duplicates()
+        blocksize = None
+        if self.smoother == "gauss_seidel" and prolongation is None and frozen.format == "bsr":
+            frozen, blocksize = _scalar_copy(frozen), frozen.blocksize
         self._source = _Source(frozen, near_null_space,
-                               None if prolongation is None else sp.csr_matrix(prolongation))
+                               None if prolongation is None else sp.csr_matrix(prolongation), blocksize)
         self._construct()
         seconds = self.timer() - start
         logger.debug("built AMG hierarchy: %s levels, operator complexity %.2f, %.3f s",
@@ -236,6 +244,8 @@ class AMGConjugateGradient(_LinearSolver):
         matrix = source.matrix
         if source.prolongation is not None:
             matrix = (source.prolongation.T @ matrix @ source.prolongation).tocsr()
+        elif source.blocksize is not None:
+            matrix = sp.bsr_matrix(matrix, blocksize=source.blocksize)
         # Gauss-Seidel first in every case: it draws nothing at set-up (see the class docstring);
         # block Jacobi gets its deterministic weights once the levels exist.
         gauss_seidel = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
@@ -248,8 +258,11 @@ class AMGConjugateGradient(_LinearSolver):
         if self.strength_theta and hierarchy.operator_complexity() > 2.5:
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
             hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength="symmetric", **options)
-        if self.smoother != "block_gauss_seidel":
+        if source.blocksize is not None:
+            self._finest_point_wise(hierarchy, source.matrix)
+        elif self.smoother != "block_gauss_seidel":
             self._set_smoothers(hierarchy)
+        self._refreshed = False
         cycle = _v_cycle(hierarchy)
         try:
             cycle(np.zeros(matrix.shape[0]))  # the coarse solver sets up lazily: count it here
@@ -266,11 +279,7 @@ class AMGConjugateGradient(_LinearSolver):
         level's block sweeps, or block Jacobi weighted by a bound per level (``self.smoother``)."""
         from pyamg.relaxation.smoothing import change_smoothers
 
-        finest = hierarchy.levels[0]
-        if self.smoother == "gauss_seidel":  # the coarse levels keep the block sweeps of the build
-            if finest.A.format == "bsr":  # a CSR finest level (two-level cycles) already sweeps point-wise
-                finest.A = _scalar_copy(finest.A)
-                finest.presmoother, finest.postsmoother = _point_gauss_seidel()
+        if self.smoother == "gauss_seidel":  # a CSR finest level (two-level cycles) already sweeps point-wise
             return
         if self.smoother == "block_gauss_seidel":
             pre, post = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
@@ -280,6 +289,13 @@ class AMGConjugateGradient(_LinearSolver):
                                       "iterations": 1, "withrho": False})
                     for level in hierarchy.levels[:-1]]
         change_smoothers(hierarchy, weighted, weighted)
+
+    @staticmethod
+    def _finest_point_wise(hierarchy, matrix: sp.csr_matrix) -> None:
+        """``matrix`` (CSR, sorted) under the finest level, with point-wise sweeps; the coarse levels keep theirs."""
+        finest = hierarchy.levels[0]
+        finest.A = matrix
+        finest.presmoother, finest.postsmoother = _point_gauss_seidel()
 
     def refresh(self, matrix: sparse.spmatrix) -> None:
         """Put ``matrix`` under the hierarchy's finest level (its smoother and residuals), keeping the coarse levels.
@@ -304,8 +320,29 @@ class AMGConjugateGradient(_LinearSolver):
             raise ValueError("refresh() applies to a hierarchy built on the matrix itself, not a two-level one")
         if matrix.shape != hierarchy.levels[0].A.shape:
             raise ValueError(f"matrix has shape {matrix.shape}; the hierarchy was built for {hierarchy.levels[0].A.shape}")
-        hierarchy.levels[0].A = sp.bsr_matrix(matrix, blocksize=(3, 3))
-        self._set_smoothers(hierarchy)
+        if self.smoother == "gauss_seidel":
+            self._finest_point_wise(hierarchy, _scalar_copy(matrix))
+        else:
+            hierarchy.levels[0].A = sp.bsr_matrix(matrix, blocksize=(3, 3))
+            self._set_smoothers(hierarchy)
+        self._refreshed = True
+
+    def restore(self) -> None:
+        """Put the built matrix back under the finest level after :meth:`refresh` (nothing to do otherwise).
+
+        Why: the preconditioner of a step must depend on the build and that step's own system only. A refresh
+        kept after contact ends would make the steps that follow depend on the last contact step, which a run
+        resumed from a checkpoint (whose hierarchy is rebuilt from the recorded build) does not have.
+        """
+        hierarchy, source = self.hierarchy, self._source
+        if hierarchy is None or source is None or not self._refreshed:
+            return
+        if source.blocksize is not None:
+            self._finest_point_wise(hierarchy, source.matrix)
+        else:
+            hierarchy.levels[0].A = source.matrix
+            self._set_smoothers(hierarchy)
+        self._refreshed = False
 
     def precondition(self, r: np.ndarray) -> np.ndarray:
         """One cycle from a zero guess: z ~ A^-1 r (an SPD operator for CG).
@@ -373,9 +410,7 @@ class AMGConjugateGradient(_LinearSolver):
 
 
 def _scalar_copy(matrix) -> sp.csr_matrix:
-    """``matrix`` in CSR form with sorted indices (the point-wise sweeps' format; it replaces the BSR copy of the
-    finest level in the hierarchy, so the cycle's residuals use it too and the memory grows by 3.5 bytes per
-    nonzero, not by a second copy)."""
+    """``matrix`` in CSR form with sorted indices: the point-wise sweeps' format."""
     scalar = sp.csr_matrix(matrix)
     scalar.sort_indices()
     return scalar
