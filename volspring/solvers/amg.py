@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -223,11 +223,8 @@ class AMGConjugateGradient(_LinearSolver):
         # Canonical (sorted, summed) up front: pyamg sorts the indices in place, and a hierarchy rebuilt
         # from the sorted matrix (after unpickling) would otherwise differ from one built before.
         frozen.sum_duplicates()
-        blocksize = None
-        if self.smoother == "gauss_seidel" and prolongation is None and frozen.format == "bsr":
-            frozen, blocksize = _scalar_copy(frozen), frozen.blocksize
         self._source = _Source(frozen, near_null_space,
-                               None if prolongation is None else sp.csr_matrix(prolongation), blocksize)
+                               None if prolongation is None else sp.csr_matrix(prolongation))
         self._construct()
         seconds = self.timer() - start
         logger.debug("built AMG hierarchy: %s levels, operator complexity %.2f, %.3f s",
@@ -258,19 +255,24 @@ class AMGConjugateGradient(_LinearSolver):
         if self.strength_theta and hierarchy.operator_complexity() > 2.5:
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
             hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength="symmetric", **options)
-        if source.blocksize is not None:
+        del matrix  # the BSR form made from a CSR source goes once the hierarchy is built (peak memory)
+        if self.smoother == "gauss_seidel" and hierarchy.levels[0].A.format == "bsr":
+            if source.blocksize is None:  # a new build: from now on the kept copy is the CSR form, the BSR goes
+                source = self._source = replace(source, matrix=_scalar_copy(source.matrix),
+                                                blocksize=source.matrix.blocksize)
             self._finest_point_wise(hierarchy, source.matrix)
         elif self.smoother != "block_gauss_seidel":
             self._set_smoothers(hierarchy)
         self._refreshed = False
         cycle = _v_cycle(hierarchy)
+        size = hierarchy.levels[0].A.shape[0]
         try:
-            cycle(np.zeros(matrix.shape[0]))  # the coarse solver sets up lazily: count it here
+            cycle(np.zeros(size))  # the coarse solver sets up lazily: count it here
         except RuntimeError:  # a singular coarsest matrix (statics of a barely held body): pseudo-inverse
             from pyamg.multilevel import coarse_grid_solver
 
             hierarchy.coarse_solver = coarse_grid_solver("pinv")
-            cycle(np.zeros(matrix.shape[0]))
+            cycle(np.zeros(size))
         self._hierarchy, self._cycle = hierarchy, cycle
         self.build_count += 1
 
