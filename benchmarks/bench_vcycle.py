@@ -73,7 +73,7 @@ def measure(k: int, steps: int, smoother: str) -> None:
     for index, level in enumerate(hierarchy.levels[:-1]):
         vector, guess = generator.standard_normal(level.A.shape[0]), np.zeros(level.A.shape[0])
         coarse = np.ones(level.P.shape[1])
-        print(f"    {index}: {level.A.shape[0]:>7} {level.A.nnz:>9} {str(level.A.blocksize):>7}: pre-smoothing "
+        print(f"    {index}: {level.A.shape[0]:>7} {level.A.nnz:>9} {str(getattr(level.A, 'blocksize', (1, 1))):>7}: pre-smoothing "
               f"{per_call(lambda: level.presmoother(level.A, guess, vector)) / mv:.2f} mv, post-smoothing "
               f"{per_call(lambda: level.postsmoother(level.A, guess, vector)) / mv:.2f}, A x "
               f"{per_call(lambda: level.A @ vector) / mv:.2f}, R x {per_call(lambda: level.R @ vector) / mv:.2f}, "
