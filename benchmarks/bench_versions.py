@@ -7,7 +7,8 @@ prints the median CPU seconds per step of each (the median over the steps of a c
 children) and their ratio, the same in sparse mat-vecs of the step's system matrix timed in the same
 child (robust to the machine's speed drifting between children), the mean CG iterations per step, the
 first step's extra time over a step in mat-vecs (the AMG build and the step's set-up), and the memory the
-stepping added per node (peak resident size after the steps less that before them, KiB).
+stepping added per node (peak resident size after the steps less that before them, KiB) beside the whole
+process's peak per node (libraries, mesh and model included: issue 15's "peak memory").
 A contact scene (two cubes, the lower one pinned at its base, the upper one pressed onto it by a
 strong gravity through the penalty contact force) reports the CG iterations per step, where the
 contact stiffness is a non-spring Jacobian.
@@ -19,6 +20,7 @@ Run::
 
     python benchmarks/bench_versions.py                      # v0.1.0, 1k and 10k nodes
     python benchmarks/bench_versions.py --ref v0.1.0 --nodes 1000 10000 --steps 20 --rounds 3
+    python benchmarks/bench_versions.py --nodes 200000 --steps 3 --rounds 1     # the memory at 200k nodes
 
 Every child holds numpy/scipy to one thread. This is a script, not a test.
 """
@@ -90,7 +92,7 @@ CHILD = textwrap.dedent('''
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     print(json.dumps({"nodes": model.node_count, "seconds": seconds, "iterations": float(np.mean(iterations)),
                       "matvec": float(np.median(matvecs)), "first_extra": first[0] - seconds,
-                      "kib_per_node": (peak - resident) / model.node_count}))
+                      "kib_per_node": (peak - resident) / model.node_count, "peak_kib_per_node": peak / model.node_count}))
 ''')
 
 
@@ -152,7 +154,8 @@ def main(argv=None) -> None:
         print(f"implicit Euler, dt = 0.01 s, median of {args.rounds} alternating runs of {args.steps} steps")
         print(f"{'scene':>8} {'nodes':>7} {args.ref + ' [ms]':>14} {'ours [ms]':>10} {'ratio':>6}"
               f" {args.ref + ' [mv]':>14} {'ours [mv]':>10} {'ratio':>6} {'CG ' + args.ref:>10} {'CG ours':>8}"
-              f" {'build ' + args.ref:>13} {'build ours':>11} {'KiB/node ' + args.ref:>16} {'ours':>6}")
+              f" {'build ' + args.ref:>13} {'build ours':>11} {'KiB/node ' + args.ref:>16} {'ours':>6}"
+              f" {'peak ' + args.ref:>12} {'ours':>6}")
         for kind, cells in cases:
             measured = {"base": [], "ours": []}
             for _ in range(args.rounds):
@@ -165,10 +168,12 @@ def main(argv=None) -> None:
             build = {name: statistics.median(r["first_extra"] / r["matvec"] for r in runs)
                      for name, runs in measured.items()}
             memory = {name: statistics.median(r["kib_per_node"] for r in runs) for name, runs in measured.items()}
+            peak = {name: statistics.median(r["peak_kib_per_node"] for r in runs) for name, runs in measured.items()}
             print(f"{kind:>8} {measured['ours'][0]['nodes']:>7} {1e3 * base:>14.2f} {1e3 * mine:>10.2f} "
                   f"{mine / base:>6.2f} {base_mv:>14.1f} {mine_mv:>10.1f} {mine_mv / base_mv:>6.2f} "
                   f"{measured['base'][0]['iterations']:>10.1f} {measured['ours'][0]['iterations']:>8.1f}"
-                  f" {build['base']:>10.0f} mv {build['ours']:>8.0f} mv {memory['base']:>16.1f} {memory['ours']:>6.1f}")
+                  f" {build['base']:>10.0f} mv {build['ours']:>8.0f} mv {memory['base']:>16.1f} {memory['ours']:>6.1f}"
+                  f" {peak['base']:>12.1f} {peak['ours']:>6.1f}")
 
 
 def _beam_cells(nodes: int) -> str:
