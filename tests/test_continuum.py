@@ -306,6 +306,25 @@ def test_fast_rotation_preserving_svd_agrees_with_lapack():
     assert ((s < 0).sum(axis=1) == inverted).all()  # one negative singular value exactly where F is inverted
 
 
+def test_twist_rows_are_the_twists_times_the_vectors():
+    """twist_rows(U, Vt, a) = q_r a without forming q_r (the smoothed rung's product rows), and the twists are an
+    orthonormal set orthogonal to the stretch directions u_i v_i^T (what makes them the rotation's directions)."""
+    from volspring.elements.tet_kinematics import corotated, twist_directions, twist_rows
+
+    rng = np.random.default_rng(3)
+    F = np.eye(3)[None] + 0.3 * rng.standard_normal((200, 3, 3))
+    vectors = rng.standard_normal((200, 4, 3))
+    U, Vt, *_ = corotated(F)
+    q = twist_directions(U, Vt)
+    expected = np.einsum("mrij,mkj->mrki", q, vectors)
+    # The same products in another order: round-off of a few eps of |a|.
+    assert np.abs(twist_rows(U, Vt, vectors) - expected).max() < 1e-14 * np.abs(vectors).max()
+    gram = np.einsum("mrij,msij->mrs", q, q)
+    assert np.abs(gram - np.eye(3)).max() < 1e-13
+    stretch = np.einsum("mic,mcj->mcij", U, Vt)  # u_c v_c^T, c = 0..2
+    assert np.abs(np.einsum("mrij,mcij->mrc", q, stretch)).max() < 1e-13
+
+
 def test_node_pairs_cover_every_node_along_edges(irregular):
     """pair_nodes: every node in one cluster of 2 (or 3 where a node is left over), its members joined by tet
     edges, the same labels every time (no random draw)."""

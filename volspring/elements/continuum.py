@@ -43,7 +43,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring.elements.base import BlockMap, ElementSet, Linearization, OperatorLinearization
-from volspring.elements.tet_kinematics import SmoothingDomains, TetGradients, corotational, pair_nodes
+from volspring.elements.tet_kinematics import (SmoothingDomains, TetGradients, corotated, corotational, pair_nodes,
+                                              twist_directions, twist_rows)
 from volspring.material import _real_array, _real_number
 from typing import TYPE_CHECKING, Self
 
@@ -247,12 +248,11 @@ class CorotatedTets(_TetContinuum):
         linearisation. K u = L u - Q^T (sign c * (Q u)): three sparse products (the twist projection of
         every tet by dF = G u and a spread took six and a Hessian per tet, about three times as long)."""
         x = np.asarray(x, dtype=np.float64)
-        _, P, twists, coefficients = corotational(self.kinematics.deformation(x))
+        U, Vt, _, P, coefficients = corotated(self.kinematics.deformation(x))
         forces = self._forces_from(P)
         if v is not None and self.stiffness_damping:
-            forces += self._damping_forces(twists, coefficients, v)
-        g = self.kinematics.gradients
-        rows = np.matmul(g[:, None, :, :], np.swapaxes(twists, 2, 3))  # (T, r, a, i) = (q_r g_a)_i
+            forces += self._damping_forces(twist_directions(U, Vt), coefficients, v)
+        rows = twist_rows(U, Vt, self.kinematics.gradients)  # (T, r, a, i) = (q_r g_a)_i
         rows *= np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))[:, :, None, None]
         indices, indptr = self._twist_layout
         Q = sp.csr_matrix((rows.ravel(), indices, indptr), shape=(len(indptr) - 1, 3 * self.node_count))

