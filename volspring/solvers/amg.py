@@ -256,11 +256,13 @@ class AMGConjugateGradient(_LinearSolver):
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
             hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength="symmetric", **options)
         del matrix  # the BSR form made from a CSR source goes once the hierarchy is built (peak memory)
-        if self.smoother == "gauss_seidel" and hierarchy.levels[0].A.format == "bsr":
-            if source.blocksize is None:  # a new build: from now on the kept copy is the CSR form, the BSR goes
+        if self.smoother == "gauss_seidel":
+            if hierarchy.levels[0].A.format == "bsr" and source.blocksize is None:
+                # A new build: from now on the kept copy is the CSR form, and the BSR goes.
                 source = self._source = replace(source, matrix=_scalar_copy(source.matrix),
                                                 blocksize=source.matrix.blocksize)
-            self._finest_point_wise(hierarchy, source.matrix)
+            # A CSR finest level (a scalar problem, a two-level cycle's coarse space) is swept point-wise as it is.
+            self._finest_point_wise(hierarchy, source.matrix if source.blocksize is not None else hierarchy.levels[0].A)
         elif self.smoother != "block_gauss_seidel":
             self._set_smoothers(hierarchy)
         self._refreshed = False
@@ -281,7 +283,7 @@ class AMGConjugateGradient(_LinearSolver):
         level's block sweeps, or block Jacobi weighted by a bound per level (``self.smoother``)."""
         from pyamg.relaxation.smoothing import change_smoothers
 
-        if self.smoother == "gauss_seidel":  # a CSR finest level (two-level cycles) already sweeps point-wise
+        if self.smoother == "gauss_seidel":  # the finest level's point-wise sweeps take the matrix they are given
             return
         if self.smoother == "block_gauss_seidel":
             pre, post = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
