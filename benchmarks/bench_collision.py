@@ -32,7 +32,8 @@ code it replaced (put back for the measurement), alternating the two, best of ``
   hash of :class:`~volspring.collision.spatial_hash.SpatialHash` (binary searches per cell of every tet box);
 - ``dense grid, edge-surface``: ``depth``, the same for the edge-triangle search of the border points;
 - ``shared csr pattern``: ``jacobian``, one pattern for dF/dx and dF/dv (``penalty._StencilPattern``) against two
-  ``csr_matrix((data, (rows, cols)))`` conversions.
+  ``csr_matrix((data, (rows, cols)))`` conversions;
+- ``dense grid, tet-tet``: ``tet-tet``, the tet-box pairs of the exact tet-tet test from the dense grid.
 
 Run: ``OMP_NUM_THREADS=1 python benchmarks/bench_collision.py`` (``--sizes 1000 20000`` to choose).
 """
@@ -105,6 +106,7 @@ def lever_times(contact, model, x, v, hits, repeat):
                                      lambda: consistent_penetration_depths(bodies, x, hits)),
         "shared csr pattern": (penalty, "_StencilPattern", ConvertedPattern,
                                lambda: contact.jacobian(model, x, v, 0.0)),
+        "dense grid, tet-tet": (spatial_hash, "box_pairs", hashed_pairs, lambda: crossing_tet_pairs(bodies, x)),
     }
     times = {}
     for name, (module, attribute, before, function) in levers.items():

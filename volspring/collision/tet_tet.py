@@ -435,7 +435,7 @@ def crossing_tet_pairs(bodies: CollisionBodies, positions: np.ndarray, *, cell_s
     >>> crossing_tet_pairs(bodies, bodies.rest_positions, boundary=True).count <= pairs.count
     True
     """
-    from volspring.collision.spatial_hash import DEFAULT_TABLE_SIZE, SpatialHash
+    from volspring.collision.spatial_hash import DEFAULT_TABLE_SIZE, box_pairs
 
     x = bodies.stack_positions(positions)
     cell_size = bodies.mean_edge_length if cell_size is None else float(cell_size)
@@ -462,14 +462,14 @@ def crossing_tet_pairs(bodies: CollisionBodies, positions: np.ndarray, *, cell_s
         for k in range(bodies.body_count - 1):  # a loop over the few bodies
             mine, later = tets[group == k], tets[group > k]
             if len(mine) and len(later):
-                grid = SpatialHash.build(lo[later], hi[later], cell_size=cell_size, table_size=table_size)
-                first, second = grid.query(lo[mine], hi[mine])
+                first, second = box_pairs(lo[later], hi[later], lo[mine], hi[mine], cell_size=cell_size,
+                                          table_size=table_size)
                 found.append((mine[first], later[second]))
         tet_a = np.concatenate([np.zeros(0, np.int64)] + [pair[0] for pair in found])
         tet_b = np.concatenate([np.zeros(0, np.int64)] + [pair[1] for pair in found])
     else:
-        grid = SpatialHash.build(lo[tets], hi[tets], cell_size=cell_size, item_group=group, table_size=table_size)
-        first, second = grid.query(lo[tets], hi[tets], query_group=group, rule="all" if self_collision else "other")
+        first, second = box_pairs(lo[tets], hi[tets], lo[tets], hi[tets], cell_size=cell_size, table_size=table_size,
+                                  item_group=group, query_group=group, rule="all" if self_collision else "other")
         keep = first < second  # each unordered pair was found from both sides
         tet_a, tet_b = tets[first[keep]], tets[second[keep]]
     if boundary:  # an edge of one through a face of the other
