@@ -133,6 +133,21 @@ def test_restore_puts_the_built_matrix_back_after_a_refresh(system, rhs, smoothe
     assert pickle.loads(pickle.dumps(solver)).precondition(rhs).tobytes() == built.tobytes()
 
 
+@pytest.mark.parametrize("theta", [0.05, 0.0])
+def test_aggregation_by_the_matrix_itself_builds_the_same_hierarchy(system, rhs, theta):
+    """build(aggregation=A) measures the couplings by the 3x3 blocks' Frobenius norms, as pyamg does for a BSR
+    matrix: given the matrix itself, the same aggregates, the same cycle bit for bit (theta 0: every block)."""
+    matrix, modes, _ = system
+    plain, given = AMGConjugateGradient(strength_theta=theta), AMGConjugateGradient(strength_theta=theta)
+    plain.build(matrix, modes)
+    given.build(matrix, modes, aggregation=matrix.tocsr())
+    assert given.precondition(rhs).tobytes() == plain.precondition(rhs).tobytes()
+    # And after pickling (the block norms travel with the solver).
+    assert pickle.loads(pickle.dumps(given)).precondition(rhs).tobytes() == plain.precondition(rhs).tobytes()
+    with pytest.raises(ValueError, match="aggregation must have the matrix's shape"):
+        AMGConjugateGradient().build(matrix, modes, aggregation=matrix.tocsr()[:30, :30])
+
+
 def test_v_cycle_adapter_falls_back_to_the_public_preconditioner_for_other_pyamg_versions(monkeypatch, system, rhs):
     matrix, modes, _ = system
     known = AMGConjugateGradient()

@@ -370,7 +370,9 @@ class ImplicitEuler(Integrator):
     def _build(self, cache, pattern, system, x, step, t, dt, v):
         # A Jacobian outside the block pattern (contact couples nodes of different bodies) goes into
         # the hierarchy too, so that the preconditioner sees the contact stiffness CG iterates on.
-        seconds = cache.solver.build(system.whole, rigid_body_modes(x[pattern.free_nodes]))
+        # Aggregates from the couplings of the system without it, though: see AMGConjugateGradient.build.
+        seconds = cache.solver.build(system.whole, rigid_body_modes(x[pattern.free_nodes]),
+                                     aggregation=None if system.extra is None else system.stand_in)
         cache.built(pattern, step, t, dt, x, v)
         # The stand-in blocks of sets applied as products cost a linearisation of their own: kept from the build
         # for the contact refreshes of the steps that reuse this hierarchy (_solve).

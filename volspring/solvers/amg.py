@@ -79,6 +79,9 @@ class _Source:
     # With the point-wise smoother: ``matrix`` is the CSR form of a BSR matrix of this block size, and also the
     # hierarchy's finest level (one copy; pyamg aggregates a BSR form of it by blocks).
     blocksize: tuple[int, int] | None = None
+    # (nodes, nodes) Frobenius norms of the 3x3 blocks of the matrix whose couplings decide the finest level's
+    # aggregates, when that is not ``matrix`` (build's ``aggregation``); None: ``matrix``'s own.
+    aggregation: sp.csr_matrix | None = None
 
 
 class AMGConjugateGradient(_LinearSolver):
@@ -198,7 +201,7 @@ class AMGConjugateGradient(_LinearSolver):
         return state
 
     def build(self, matrix: sparse.spmatrix, near_null_space: ArrayLike, *,
-              prolongation: sparse.spmatrix | None = None) -> float:
+              prolongation: sparse.spmatrix | None = None, aggregation: sparse.spmatrix | None = None) -> float:
         """Build the hierarchy for ``matrix``; returns the seconds it took (by ``timer``).
 
         Parameters
@@ -210,6 +213,14 @@ class AMGConjugateGradient(_LinearSolver):
             ``prolongation``, of the n coarse unknowns, (n, k).
         prolongation : (N, n) sparse, optional
             Coarse space of a two-level cycle (see the class docstring).
+        aggregation : (N, N) sparse, optional
+            The matrix whose couplings decide the finest level's aggregates (default ``matrix``), with the same
+            3x3 blocks, for couplings that should not join nodes into one aggregate: contact between two bodies.
+            An aggregate across a contact interface makes both sides move as one rigid piece in the coarse space,
+            which they do not (they slide and part): on a cube resting on another, a hierarchy aggregated with the
+            contact needed 10-13 CG iterations where the same step without contact needed 6, and 5-6 aggregated
+            without it (``benchmarks/bench_contact_cg.py``). The coarse operators are the Galerkin products of
+            ``matrix``, contact included.
         """
         start = self.timer()
         near_null_space = np.ascontiguousarray(near_null_space, dtype=np.float64)
@@ -223,8 +234,13 @@ class AMGConjugateGradient(_LinearSolver):
         # Canonical (sorted, summed) up front: pyamg sorts the indices in place, and a hierarchy rebuilt
         # from the sorted matrix (after unpickling) would otherwise differ from one built before.
         frozen.sum_duplicates()
+        if aggregation is not None:
+            if prolongation is not None or aggregation.shape != matrix.shape:
+                raise ValueError(f"aggregation must have the matrix's shape {matrix.shape} and no prolongation; got "
+                                 f"shape {aggregation.shape}" + (" with a prolongation" if prolongation is not None else ""))
+            aggregation = _block_norms(aggregation)
         self._source = _Source(frozen, near_null_space,
-                               None if prolongation is None else sp.csr_matrix(prolongation))
+                               None if prolongation is None else sp.csr_matrix(prolongation), aggregation=aggregation)
         self._construct()
         seconds = self.timer() - start
         logger.debug("built AMG hierarchy: %s levels, operator complexity %.2f, %.3f s",
@@ -251,10 +267,11 @@ class AMGConjugateGradient(_LinearSolver):
                        smooth=("jacobi", {"omega": PROLONGATION_OMEGA, "weighting": "local"}),
                        max_coarse=self.max_coarse, improve_candidates=None, coarse_solver="splu")
         hierarchy = pyamg.smoothed_aggregation_solver(
-            matrix, strength=("symmetric", {"theta": self.strength_theta}), **options)
+            matrix, strength=_strength(self.strength_theta, source.aggregation), **options)
         if self.strength_theta and hierarchy.operator_complexity() > 2.5:
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
-            hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength="symmetric", **options)
+            hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength=_strength(0.0, source.aggregation),
+                                                          **options)
         del matrix  # the BSR form made from a CSR source goes once the hierarchy is built (peak memory)
         if self.smoother == "gauss_seidel":
             if hierarchy.levels[0].A.format == "bsr" and source.blocksize is None:
@@ -411,6 +428,31 @@ class AMGConjugateGradient(_LinearSolver):
         info = SolveInfo("amg", iterations, residual, bool(residual <= self.rtol), self.rtol, initial,
                          setup, self.timer() - start, rebuilt)
         return self._finish(x, info)
+
+
+def _block_norms(matrix) -> sp.csr_matrix:
+    """(nodes, nodes) CSR -- the Frobenius norm of every stored 3x3 block of ``matrix`` (what pyamg's symmetric
+    strength of connection measures a block matrix by)."""
+    blocks = sp.bsr_matrix(matrix, blocksize=(3, 3))
+    blocks.sum_duplicates()
+    norms = np.sqrt((blocks.data**2).reshape(len(blocks.data), 9).sum(axis=1))
+    nodes = blocks.shape[0] // 3
+    return sp.csr_matrix((norms, blocks.indices, blocks.indptr), shape=(nodes, nodes))
+
+
+def _strength(theta: float, aggregation: sp.csr_matrix | None):
+    """pyamg's ``strength`` option: the symmetric measure with ``theta`` on every level, the finest level's taken
+    from the block norms ``aggregation`` when given (as pyamg takes it from a BSR matrix: all blocks at theta 0)."""
+    if aggregation is None:
+        return ("symmetric", {"theta": theta})
+    from pyamg.strength import symmetric_strength_of_connection
+
+    if theta:
+        finest = symmetric_strength_of_connection(aggregation, theta)
+    else:
+        finest = sp.csr_matrix((np.ones(aggregation.nnz), aggregation.indices, aggregation.indptr),
+                               shape=aggregation.shape)
+    return [("predefined", {"C": finest}), ("symmetric", {"theta": theta})]
 
 
 def _scalar_copy(matrix) -> sp.csr_matrix:
