@@ -236,8 +236,9 @@ class AMGConjugateGradient(_LinearSolver):
         frozen.sum_duplicates()
         if aggregation is not None:
             if prolongation is not None or aggregation.shape != matrix.shape:
+                given = " with a prolongation" if prolongation is not None else ""
                 raise ValueError(f"aggregation must have the matrix's shape {matrix.shape} and no prolongation; got "
-                                 f"shape {aggregation.shape}" + (" with a prolongation" if prolongation is not None else ""))
+                                 f"shape {aggregation.shape}{given}")
             aggregation = _block_norms(aggregation)
         self._source = _Source(frozen, near_null_space,
                                None if prolongation is None else sp.csr_matrix(prolongation), aggregation=aggregation)
