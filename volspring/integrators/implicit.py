@@ -290,7 +290,7 @@ class ImplicitEuler(Integrator):
             extra_full = sp.csr_matrix(sum(term for term in terms if term is not None))
             dofs = pattern.free_dofs()
             restricted = extra_full[dofs][:, dofs].tocoo()
-            touched = len(np.unique(restricted.row))
+            touched = int(np.count_nonzero(np.bincount(restricted.row, minlength=pattern.size)))
             if (restricted.row == restricted.col).all():
                 # A diagonal term (e.g. drag) is folded into the diagonal blocks, so the AMG
                 # hierarchy sees it too and CG pays nothing extra.
