@@ -1,13 +1,14 @@
 """The AMG-CG solve through volspring's V-cycle adapter against pyamg's public preconditioner.
 
-``volspring.solvers._v_cycle`` applies pyamg's V-cycle directly (for the pyamg versions it was
-checked against); pyamg's public ``ml.aspreconditioner(cycle="V")`` runs the same cycle inside
-``ml.solve(maxiter=1)``, which also takes two residual norms, i.e. two extra products with the fine
-matrix, per application. On a gmsh beam (the cantilever of ``bench_implicit.py``, h omega_max = 50)
-this builds one hierarchy and, for the system's own right-hand side (gravity) and a random one,
+``volspring.solvers.amg._v_cycle`` runs pyamg's V-cycle on the hierarchy's levels itself (on levels held as
+triangles it sweeps from zero over the lower one and takes the residual from the upper one); pyamg's public
+``ml.aspreconditioner(cycle="V")`` runs its cycle inside ``ml.solve(maxiter=1)``, which also takes two residual
+norms, i.e. two extra products with the fine matrix, per application. On a gmsh beam (the cantilever of
+``bench_implicit.py``, h omega_max = 50) this builds one hierarchy and, for the system's own right-hand side (gravity) and a random one,
 solves at rtol 1e-3 and 1e-6 both ways, interleaved, and prints the CG iterations, the median CPU
 time of a solve and of one preconditioner application, each also in mat-vecs, and the ratio public
-/ adapter; it checks that both give the same answer bit for bit.
+/ adapter, and how far apart the two answers are (rounding: pyamg's cycle takes its residuals from the whole
+matrix, the adapter from the triangles).
 
 Run (numpy/scipy threads are held to one before numpy is imported)::
 
@@ -89,12 +90,12 @@ def main(argv=None):
                         matrix.__matmul__, b, preconditioner=public, rtol=rtol, maxiter=solver.maxiter)
                     times["public"].append(CLOCK() - start)
                 seconds = {key: float(np.median(value)) for key, value in times.items()}
-                same = answers["adapter"].tobytes() == answers["public"].tobytes()
+                apart = np.linalg.norm(answers["adapter"] - answers["public"]) / np.linalg.norm(answers["public"])
                 print(f"  {name:7s} rhs, rtol {rtol:g}: iterations adapter {iterations['adapter']}, public "
                       f"{iterations['public']}; solve adapter {seconds['adapter'] * 1e3:.1f} ms "
                       f"({seconds['adapter'] / matvec:.0f} mv), public {seconds['public'] * 1e3:.1f} ms "
                       f"({seconds['public'] / matvec:.0f} mv), public / adapter "
-                      f"{seconds['public'] / seconds['adapter']:.3f}; same answer bit for bit: {same}", flush=True)
+                      f"{seconds['public'] / seconds['adapter']:.3f}; answers apart {apart:.1e} (relative)", flush=True)
     print(f"load average after: {os.getloadavg()}")
 
 

@@ -45,7 +45,7 @@ Examples
 
 from __future__ import annotations
 
-from volspring.solvers.amg import AMGConjugateGradient, BLOCK_JACOBI_OMEGA, PROLONGATION_OMEGA, PYAMG_CYCLE_VERSIONS
+from volspring.solvers.amg import AMGConjugateGradient, BLOCK_JACOBI_OMEGA, PROLONGATION_OMEGA
 from volspring.solvers.krylov import (LINEAR_SOLVERS, DirectSolver, JacobiConjugateGradient, SolveInfo,
                                       conjugate_gradient)
 from typing import TYPE_CHECKING, Any
@@ -55,7 +55,7 @@ if TYPE_CHECKING:
 
 __all__ = ["SolveInfo", "conjugate_gradient", "DirectSolver", "JacobiConjugateGradient",
            "AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "LINEAR_SOLVERS", "PROLONGATION_OMEGA",
-           "PYAMG_CYCLE_VERSIONS", "make_linear_solver"]
+           "make_linear_solver"]
 
 
 def make_linear_solver(method: str, **options: Any) -> _LinearSolver:

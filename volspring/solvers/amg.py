@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
     from scipy import sparse
 
-__all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "PROLONGATION_OMEGA", "PYAMG_CYCLE_VERSIONS", "SMOOTHERS"]
+__all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "PROLONGATION_OMEGA", "SMOOTHERS"]
 
 logger = logging.getLogger(__name__)
 
@@ -29,56 +29,192 @@ SMOOTHERS = ("gauss_seidel", "block_gauss_seidel", "jacobi")
 PROLONGATION_OMEGA = 2.0
 #: Weight of the block Jacobi smoother, divided by a Gershgorin bound of D^-1 A on each level.
 BLOCK_JACOBI_OMEGA = 2.0 / 3.0
-#: pyamg releases (major, minor), first and last, whose private recursive cycle
-#: ``MultilevelSolver.__solve(level, x, b, cycle)`` :func:`_v_cycle` was checked against: the same
-#: signature and the same V-cycle arithmetic in 5.0.0, 5.1.0, 5.2.1, 5.3.0 and 5.4.1.
-PYAMG_CYCLE_VERSIONS = ((5, 0), (5, 4))
 
 
 def _v_cycle(hierarchy):
     """The function r -> z applying one V-cycle of ``hierarchy`` from a zero guess, z ~ A^-1 r.
 
-    pyamg's public preconditioner, ``hierarchy.aspreconditioner(cycle="V")``, runs
-    ``hierarchy.solve(r, maxiter=1)``, which around the one cycle also takes ||r||, ||r - A 0|| and
-    ||r - A z||: two products with the fine matrix per application, on top of the cycle's own three
-    to four, and CG applies it once per iteration. For the pyamg versions in
-    :data:`PYAMG_CYCLE_VERSIONS` this calls the cycle underneath directly (the private
-    ``MultilevelSolver.__solve``); for any other version, or if that method is gone, it returns
-    the public operator. Both run the same arithmetic on the same zero guess, so they give the same
-    z bit for bit; the public one is slower: on a 9,741-node gmsh beam at h omega_max = 50, 1.31 times
-    the CPU time per application and 1.15 to 1.22 times per CG solve (rtol 1e-3 and 1e-6, same
-    iterations; ``python benchmarks/bench_solvers.py``).
+    The cycle of pyamg's ``MultilevelSolver`` (pre-smoothing, residual, restriction, the coarser levels, prolongation,
+    post-smoothing), run on its levels without what pyamg's public preconditioner,
+    ``hierarchy.aspreconditioner(cycle="V")``, adds around it: ``hierarchy.solve(r, maxiter=1)`` also takes ||r||,
+    ||r - A 0|| and ||r - A z||, two products with the fine matrix per application (1.31 times the CPU time per
+    application on a 9,741-node gmsh beam; ``python benchmarks/bench_solvers.py``). A level whose matrix is held
+    as its triangles (:class:`_Triangles`, the default smoother's levels) sweeps forward from the zero guess over the
+    lower triangle only and takes the residual from the upper one, half a mat-vec each instead of one; any other
+    level runs pyamg's own arithmetic, so with the other smoothers the cycle gives pyamg's z bit for bit.
     """
-    import pyamg
+    levels = hierarchy.levels
+    if len(levels) == 1:
+        return hierarchy.aspreconditioner(cycle="V").matvec
+    last = len(levels) - 2
 
-    public = hierarchy.aspreconditioner(cycle="V")
-    try:
-        version = tuple(int(part) for part in pyamg.__version__.split(".")[:2])  # "5.4.1" -> (5, 4)
-    except ValueError:  # not a release number: only the public path is safe
-        version = None
-    first, last = PYAMG_CYCLE_VERSIONS
-    cycle = getattr(hierarchy, "_MultilevelSolver__solve", None)
-    if version is None or not first <= version <= last or cycle is None or len(hierarchy.levels) == 1:
-        return public.matvec
-
-    def apply(r):
-        z = np.zeros_like(r)
-        cycle(0, z, r, "V")
+    def apply(r, index=0):
+        level = levels[index]
+        matrix = level.A
+        if isinstance(matrix, _Triangles):
+            z, residual = matrix.forward_from_zero(r)
+        else:
+            z = np.zeros_like(r)
+            level.presmoother(matrix, z, r)
+            residual = r - matrix @ z
+        coarse = level.R @ residual
+        z += level.P @ (hierarchy.coarse_solver(levels[-1].A, coarse) if index == last else apply(coarse, index + 1))
+        level.postsmoother(matrix, z, r)
         return z
 
     return apply
+
+
+class _Triangles:
+    """A square sparse matrix held as two triangles, for Gauss-Seidel sweeps that cost half a mat-vec from a zero guess.
+
+    ``lower`` holds the matrix's entries on and left of the diagonal, ``upper`` those on and right of it, so
+    the diagonal is held twice and nothing else. A forward sweep from x = 0 reads only the lower triangle
+    (x_j is still 0 right of the diagonal): it solves (D + L) z = r, and then the residual r - A z is
+    -U z = D z - (D + U) z, without the rest of A. Each is half a mat-vec where pyamg's cycle spends one on
+    each. A backward sweep reads both: r - L z from ``lower``, then the sweep over ``upper``. The V-cycle of the
+    README beam went from 6.3 to 5.1 mat-vecs at 10k nodes and from 13.3 to 10.3 at 45k, the same cycle to
+    rounding (``python benchmarks/bench_vcycle.py`` prints a step's parts).
+
+    Parameters
+    ----------
+    matrix : (N, N) CSR, or BSR with square blocks
+        Sorted, no duplicates. CSR is swept point-wise; BSR by blocks, or point-wise (``point_wise``): then the
+        triangles are CSR and the diagonal blocks' entries on the other side of the diagonal are stored as zeros
+        (the blocks' layout stays whole, so :meth:`whole` gives the BSR matrix back entry for entry).
+    point_wise : bool
+        Sweep a BSR matrix entry by entry.
+
+    It stands in for the matrix on a pyamg level: ``shape``, ``nnz``, ``format``, ``dtype``, ``@``, and the level's
+    smoothers :meth:`forward` and :meth:`backward` for any x (pyamg's own cycle and ``solve`` run on it too).
+    """
+
+    def __init__(self, matrix, *, point_wise: bool = False):
+        if not matrix.has_sorted_indices:
+            raise ValueError("triangles are made from a matrix with sorted indices")
+        self.shape, self.dtype, self.nnz = matrix.shape, matrix.dtype, matrix.nnz
+        blocked = matrix.format == "bsr"
+        size = matrix.blocksize[0] if blocked else 1
+        rows = np.repeat(np.arange(matrix.shape[0] // size, dtype=matrix.indices.dtype), np.diff(matrix.indptr))
+        halves = []
+        for keep, where in (("lower", matrix.indices <= rows), ("upper", matrix.indices >= rows)):
+            half = _rows_where(matrix, rows, where)
+            # One half at a time, its block form dropped at once: they are made after a build, at its peak memory.
+            halves.append(_scalar_triangle(half, keep) if blocked and point_wise else half)
+            del half
+        lower, upper = halves
+        del rows, halves
+        self.blocksize = (size, size) if blocked else None
+        self.inverse = None
+        if blocked and not point_wise:
+            from pyamg.util.utils import get_block_diag
+
+            self.inverse = get_block_diag(matrix, blocksize=size, inv_flag=True)
+        self.lower, self.upper = lower, upper
+        self.format = lower.format
+        self.diagonal = _block_diagonal(lower, size) if self.inverse is not None else lower.diagonal()
+
+    def _diagonal_times(self, x: np.ndarray) -> np.ndarray:
+        if self.inverse is None:
+            return self.diagonal * x
+        size = self.diagonal.shape[1]
+        return np.einsum("nij,nj->ni", self.diagonal, x.reshape(-1, size)).reshape(x.shape)
+
+    def _sweep(self, triangle, x: np.ndarray, b: np.ndarray, direction: str) -> None:
+        from pyamg.relaxation.relaxation import block_gauss_seidel, gauss_seidel
+
+        if self.inverse is None:
+            gauss_seidel(triangle, x, b, iterations=1, sweep=direction)
+        else:
+            block_gauss_seidel(triangle, x, b, iterations=1, sweep=direction, blocksize=len(self.inverse[0]),
+                               Dinv=self.inverse)
+
+    def forward_from_zero(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """z = (D + L)^-1 r, a forward sweep from x = 0, and the residual r - A z = -U z."""
+        z = np.zeros_like(r)
+        self._sweep(self.lower, z, r, "forward")
+        return z, self._diagonal_times(z) - self.upper @ z
+
+    def forward(self, x: np.ndarray, b: np.ndarray) -> None:
+        """One forward Gauss-Seidel sweep on A x = b from any x, in place."""
+        self._sweep(self.lower, x, b - (self.upper @ x - self._diagonal_times(x)), "forward")
+
+    def backward(self, x: np.ndarray, b: np.ndarray) -> None:
+        """One backward Gauss-Seidel sweep on A x = b from any x, in place."""
+        self._sweep(self.upper, x, b - (self.lower @ x - self._diagonal_times(x)), "backward")
+
+    def __matmul__(self, x: np.ndarray) -> np.ndarray:
+        return self.lower @ x + (self.upper @ x - self._diagonal_times(x))
+
+    def whole(self):
+        """The matrix the triangles were made from, entry for entry (BSR for a blocked one, else CSR)."""
+        size = 1 if self.blocksize is None else self.blocksize[0]
+        lower, upper = self.lower, self.upper
+        if self.blocksize is not None and self.inverse is None:  # point-wise triangles of a BSR matrix
+            lower, upper = sp.bsr_matrix(lower, blocksize=self.blocksize), sp.bsr_matrix(upper, blocksize=self.blocksize)
+        nodes = self.shape[0] // size
+        lower_rows = np.repeat(np.arange(nodes), np.diff(lower.indptr))
+        upper_rows = np.repeat(np.arange(nodes), np.diff(upper.indptr))
+        right = upper.indices > upper_rows  # the diagonal comes from the lower triangle...
+        data = np.concatenate([lower.data, upper.data[right]])
+        if self.blocksize is not None and self.inverse is None:
+            # ...but for point-wise triangles each side holds only its own half of a diagonal block.
+            on_diagonal = np.flatnonzero(lower.indices == lower_rows)
+            above = np.triu(np.ones(self.blocksize, dtype=bool), 1)
+            data[on_diagonal] = np.where(above, upper.data[upper.indices == upper_rows], data[on_diagonal])
+        order = np.argsort(np.concatenate([lower_rows, upper_rows[right]]), kind="stable")
+        indices = np.concatenate([lower.indices, upper.indices[right]])[order]
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(lower_rows, minlength=nodes) +
+                                                np.bincount(upper_rows[right], minlength=nodes))])
+        kind = sp.bsr_matrix if self.blocksize is not None else sp.csr_matrix
+        return kind((data[order], indices.astype(lower.indices.dtype), indptr.astype(lower.indptr.dtype)),
+                    shape=self.shape)
+
+
+def _rows_where(matrix, rows: np.ndarray, where: np.ndarray):
+    """The entries (or blocks) of a CSR (or BSR) ``matrix``, in rows ``rows``, where ``where`` holds; same format."""
+    counts = np.bincount(rows[where], minlength=len(matrix.indptr) - 1)
+    indptr = np.concatenate([[0], np.cumsum(counts)]).astype(matrix.indptr.dtype)
+    kind = sp.bsr_matrix if matrix.format == "bsr" else sp.csr_matrix
+    return kind((matrix.data[where], matrix.indices[where], indptr), shape=matrix.shape)
+
+
+def _scalar_triangle(blocks: sp.bsr_matrix, keep: str) -> sp.csr_matrix:
+    """The CSR form of a BSR triangle (every block whole, sorted), zeros stored for its diagonal blocks' entries on the
+    other side of the diagonal. The diagonal block is the last of its block row in the lower triangle, the first in
+    the upper one, so those entries are found from the row pointers alone (no array per entry: this runs at a
+    build's peak memory)."""
+    size, count = blocks.blocksize[0], blocks.shape[0] // blocks.blocksize[0]
+    ends = blocks.indptr[1:] - 1 if keep == "lower" else blocks.indptr[:-1]
+    if not (np.diff(blocks.indptr) > 0).all() or not (blocks.indices[ends] == np.arange(count)).all():
+        raise ValueError("every block row needs its diagonal block for Gauss-Seidel")
+    scalar = blocks.tocsr()
+    other = np.triu(np.ones((size, size), dtype=bool), 1) if keep == "lower" else np.tril(np.ones((size, size), bool), -1)
+    within, column = np.nonzero(other)  # row and column inside the block of each entry to clear
+    rows = size * np.arange(count)[:, None] + within
+    positions = scalar.indptr[rows + 1] - size + column if keep == "lower" else scalar.indptr[rows] + column
+    scalar.data[positions.ravel()] = 0.0
+    return scalar
+
+
+def _block_diagonal(matrix: sp.bsr_matrix, size: int) -> np.ndarray:
+    """(N / size, size, size) -- the diagonal blocks of a BSR triangle (one per block row, each present)."""
+    rows = np.repeat(np.arange(matrix.shape[0] // size), np.diff(matrix.indptr))
+    on_diagonal = matrix.indices == rows
+    if on_diagonal.sum() != matrix.shape[0] // size:
+        raise ValueError("every block row needs its diagonal block for block Gauss-Seidel")
+    return matrix.data[on_diagonal]
 
 
 @dataclass(frozen=True)
 class _Source:
     """What a hierarchy is built from: enough to rebuild it bit for bit (after unpickling)."""
 
-    matrix: sp.spmatrix           # frozen copy of the fine matrix
+    # Frozen copy of the fine matrix. With the default smoother it is the triangles of the hierarchy's finest level
+    # (one copy, the same object; a rebuild gives pyamg their whole matrix), except for a two-level cycle.
+    matrix: sp.spmatrix | _Triangles
     near_null_space: np.ndarray   # (N, k) or, with a prolongation, (n, k)
     prolongation: sp.spmatrix | None = None  # (N, n): coarse space of a two-level cycle
-    # With the point-wise smoother: ``matrix`` is the CSR form of a BSR matrix of this block size, and also the
-    # hierarchy's finest level (one copy; pyamg aggregates a BSR form of it by blocks).
-    blocksize: tuple[int, int] | None = None
     # (nodes, nodes) Frobenius norms of the 3x3 blocks of the matrix whose couplings decide the finest level's
     # aggregates, when that is not ``matrix`` (build's ``aggregation``); None: ``matrix``'s own.
     aggregation: sp.csr_matrix | None = None
@@ -105,9 +241,10 @@ class AMGConjugateGradient(_LinearSolver):
         steps of both). Point-wise on the 6x6-block coarse levels saved nothing. Block Jacobi needs
         twice the iterations; Chebyshev (degree 3, in A) saved one iteration in five at 10k but
         nothing at 50k, and unlike Gauss-Seidel it is not invariant to the diagonal scaling that
-        large mass ratios bring, so it is not offered. With the point-wise sweeps the kept copy of the
-        built matrix is that CSR copy, which is also the finest level of the hierarchy (pyamg aggregates a
-        BSR form of it made for the build): one copy, 3.5 bytes per nonzero more than the BSR one.
+        large mass ratios bring, so it is not offered. With the default every level but the coarsest is
+        held as its two triangles (:class:`_Triangles`), which makes each sweep from a zero guess and the
+        residual after it half a mat-vec each; the finest level's triangles are also the kept copy of the
+        built matrix (CSR, 3.5 bytes per nonzero more than a BSR copy; pyamg builds from the BSR matrix).
     max_coarse : int
         Unknowns on the coarsest level (solved with sparse LU).
     strength_theta : float
@@ -129,8 +266,8 @@ class AMGConjugateGradient(_LinearSolver):
 
     The hierarchy is built from an explicit :meth:`build` call (or the first solve) and kept;
     it is a frozen copy, so later refills of the matrix do not disturb it. The V-cycle is
-    applied through :func:`_v_cycle` (pyamg's cycle without the two residual norms its public
-    preconditioner adds).
+    applied through :func:`_v_cycle` (pyamg's cycle on its levels, without the two residual norms its
+    public preconditioner adds, on triangles where the levels are held so).
 
     Two-level cycle: :meth:`build` with a ``prolongation`` P (N, n) builds the hierarchy on the
     Galerkin coarse matrix P^T A P (``near_null_space`` then has n rows) and preconditions with
@@ -230,10 +367,16 @@ class AMGConjugateGradient(_LinearSolver):
                              f"for a {matrix.shape} matrix")
         if near_null_space.ndim != 2 or near_null_space.shape[0] != coarse_size:
             raise ValueError(f"near_null_space has shape {near_null_space.shape}, expected ({coarse_size}, k)")
-        frozen = matrix.copy() if matrix.format in ("csr", "bsr") else matrix.tocsr()
-        # Canonical (sorted, summed) up front: pyamg sorts the indices in place, and a hierarchy rebuilt
-        # from the sorted matrix (after unpickling) would otherwise differ from one built before.
-        frozen.sum_duplicates()
+        if self.smoother == "gauss_seidel" and prolongation is None and matrix.format == "bsr" and \
+                matrix.blocksize == (3, 3) and matrix.has_canonical_format:
+            # pyamg builds from the matrix as given (it only reads a canonical one), and the kept copy is the
+            # triangles made after the build: no third copy at the build's peak (1 KiB per node).
+            frozen = matrix
+        else:
+            frozen = matrix.copy() if matrix.format in ("csr", "bsr") else matrix.tocsr()
+            # Canonical (sorted, summed) up front: pyamg sorts the indices in place, and a hierarchy rebuilt
+            # from the sorted matrix (after unpickling) would otherwise differ from one built before.
+            frozen.sum_duplicates()
         if aggregation is not None:
             if prolongation is not None or aggregation.shape != matrix.shape:
                 given = " with a prolongation" if prolongation is not None else ""
@@ -258,8 +401,8 @@ class AMGConjugateGradient(_LinearSolver):
         matrix = source.matrix
         if source.prolongation is not None:
             matrix = (source.prolongation.T @ matrix @ source.prolongation).tocsr()
-        elif source.blocksize is not None:
-            matrix = sp.bsr_matrix(matrix, blocksize=source.blocksize)
+        elif isinstance(matrix, _Triangles):  # a rebuild
+            matrix = matrix.whole()
         # Gauss-Seidel first in every case: it draws nothing at set-up (see the class docstring);
         # block Jacobi gets its deterministic weights once the levels exist.
         gauss_seidel = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
@@ -273,14 +416,18 @@ class AMGConjugateGradient(_LinearSolver):
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
             hierarchy = pyamg.smoothed_aggregation_solver(matrix, strength=_strength(0.0, source.aggregation),
                                                           **options)
-        del matrix  # the BSR form made from a CSR source goes once the hierarchy is built (peak memory)
-        if self.smoother == "gauss_seidel":
-            if hierarchy.levels[0].A.format == "bsr" and source.blocksize is None:
-                # A new build: from now on the kept copy is the CSR form, and the BSR goes.
-                source = self._source = replace(source, matrix=_scalar_copy(source.matrix),
-                                                blocksize=source.matrix.blocksize)
-            # A CSR finest level (a scalar problem, a two-level cycle's coarse space) is swept point-wise as it is.
-            self._finest_point_wise(hierarchy, source.matrix if source.blocksize is not None else hierarchy.levels[0].A)
+        del matrix  # the whole matrix made from kept triangles goes once the hierarchy is built (peak memory)
+        if self.smoother == "gauss_seidel" and len(hierarchy.levels) > 1:
+            finest = hierarchy.levels[0].A
+            if isinstance(source.matrix, _Triangles):
+                finest = source.matrix
+            else:
+                # Point-wise sweeps on every matrix of 3x3 blocks: pyamg's block sweep there costs 3.5 times as much.
+                finest.sort_indices()  # a two-level cycle's coarse space comes out of a product unsorted
+                finest = _Triangles(finest, point_wise=True)
+                if source.prolongation is None:  # a new build: from now on the triangles are the kept copy
+                    source = self._source = replace(source, matrix=finest)
+            self._set_triangles(hierarchy, finest)
         elif self.smoother != "block_gauss_seidel":
             self._set_smoothers(hierarchy)
         self._refreshed = False
@@ -313,11 +460,17 @@ class AMGConjugateGradient(_LinearSolver):
         change_smoothers(hierarchy, weighted, weighted)
 
     @staticmethod
-    def _finest_point_wise(hierarchy, matrix: sp.csr_matrix) -> None:
-        """``matrix`` (CSR, sorted) under the finest level, with point-wise sweeps; the coarse levels keep theirs."""
-        finest = hierarchy.levels[0]
-        finest.A = matrix
-        finest.presmoother, finest.postsmoother = _point_gauss_seidel()
+    def _set_triangles(hierarchy, finest: _Triangles) -> None:
+        """Every level but the coarsest held as its triangles, swept by them (see :func:`_v_cycle`): the finest as
+        ``finest`` (point-wise), the coarser ones by blocks."""
+        levels = hierarchy.levels
+        levels[0].A = finest
+        for level in levels[1:-1]:
+            if not isinstance(level.A, _Triangles):
+                level.A.sort_indices()  # pyamg's Galerkin products need not sort them
+                level.A = _Triangles(level.A)
+        for level in levels[:-1]:
+            level.presmoother, level.postsmoother = _forward_sweep, _backward_sweep
 
     def refresh(self, matrix: sparse.spmatrix) -> None:
         """Put ``matrix`` under the hierarchy's finest level (its smoother and residuals), keeping the coarse levels.
@@ -342,8 +495,13 @@ class AMGConjugateGradient(_LinearSolver):
             raise ValueError("refresh() applies to a hierarchy built on the matrix itself, not a two-level one")
         if matrix.shape != hierarchy.levels[0].A.shape:
             raise ValueError(f"matrix has shape {matrix.shape}; the hierarchy was built for {hierarchy.levels[0].A.shape}")
-        if self.smoother == "gauss_seidel":
-            self._finest_point_wise(hierarchy, _scalar_copy(matrix))
+        if isinstance(source.matrix, _Triangles):
+            finest = source.matrix
+            given = sp.bsr_matrix(matrix, blocksize=finest.blocksize) if finest.blocksize else sp.csr_matrix(matrix)
+            if not given.has_canonical_format:
+                given = given.copy()
+                given.sum_duplicates()
+            hierarchy.levels[0].A = _Triangles(given, point_wise=True)
         else:
             hierarchy.levels[0].A = sp.bsr_matrix(matrix, blocksize=(3, 3))
             self._set_smoothers(hierarchy)
@@ -359,8 +517,8 @@ class AMGConjugateGradient(_LinearSolver):
         hierarchy, source = self.hierarchy, self._source
         if hierarchy is None or source is None or not self._refreshed:
             return
-        if source.blocksize is not None:
-            self._finest_point_wise(hierarchy, source.matrix)
+        if isinstance(source.matrix, _Triangles):
+            hierarchy.levels[0].A = source.matrix
         else:
             hierarchy.levels[0].A = source.matrix
             self._set_smoothers(hierarchy)
@@ -456,25 +614,14 @@ def _strength(theta: float, aggregation: sp.csr_matrix | None):
     return [("predefined", {"C": finest}), ("symmetric", {"theta": theta})]
 
 
-def _scalar_copy(matrix) -> sp.csr_matrix:
-    """``matrix`` in CSR form with sorted indices: the point-wise sweeps' format."""
-    scalar = sp.csr_matrix(matrix)
-    scalar.sort_indices()
-    return scalar
+def _forward_sweep(A: _Triangles, x: np.ndarray, b: np.ndarray) -> None:
+    """A pyamg pre-smoother on a level held as triangles."""
+    A.forward(x, b)
 
 
-def _point_gauss_seidel() -> tuple[Callable, Callable]:
-    """pyamg smoothers ``(A, x, b) -> None`` for a CSR level: one forward and one backward point-wise Gauss-Seidel
-    sweep (pyamg's own, which on a BSR matrix would sweep by blocks)."""
-    from pyamg.relaxation.relaxation import gauss_seidel
-
-    def forward(A, x, b):
-        gauss_seidel(A, x, b, iterations=1, sweep="forward")
-
-    def backward(A, x, b):
-        gauss_seidel(A, x, b, iterations=1, sweep="backward")
-
-    return forward, backward
+def _backward_sweep(A: _Triangles, x: np.ndarray, b: np.ndarray) -> None:
+    """A pyamg post-smoother on a level held as triangles."""
+    A.backward(x, b)
 
 
 def _block_jacobi_bound(matrix) -> float:
