@@ -17,7 +17,8 @@ Scenes (E = 1e7 Pa, nu = 0.45, 1000 kg/m^3, two 0.2 m cubes of ``--cells`` cells
 
 Per step: the contacts at the step's start, CG iterations with contact and without and their ratio, both as the
 step ran them (warm started) and for the same two systems solved again from zero with the same hierarchies (the
-preconditioner's share, without the warm start's: a free fall is extrapolated almost exactly, 1 iteration), and
+preconditioner's share, without the warm start's: the projection onto the last velocity changes guesses a free
+fall almost exactly, 0-1 iterations), and
 whether the step (re)built the AMG hierarchy (``B`` with contact, ``b`` without); the first contact step is marked.
 Summary per scene: median and max ratio over the contact steps, the first contact step's ratio, the steps above 1.5.
 
@@ -28,7 +29,8 @@ when the scene forces' Jacobian reaches ``rebuild_growth`` times more or fewer u
 obstacle's contact, folded into the matrix's diagonal, refreshes the finest level like contact between bodies.
 From zero, median / max: before all three (commit 97ad6dc) pressed 1.33 / 2.00, drop 2.00 / 3.75, floor 1.50 /
 2.40; with the rebuilds and the floor's refresh (77f4f62) 1.33 / 2.00, 2.17 / 3.00, 1.17 / 1.33; with the
-aggregates too (1cbb53c) 1.00 / 1.83, 1.17 / 1.50, 1.17 / 1.33.
+aggregates too (1cbb53c) 1.00 / 1.83, 1.17 / 1.50, 1.17 / 1.33; with the warm start by projection (4cd2ab7, another
+trajectory) 1.17 / 1.83, 1.00 / 1.25, 0.83 / 1.25.
 
 Run (the script holds numpy to one thread; about 5 s)::
 

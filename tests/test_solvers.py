@@ -231,6 +231,33 @@ def test_triangles_give_their_matrix_back_entry_for_entry_and_sweep_as_pyamg(sys
         np.testing.assert_allclose(ours, theirs, rtol=0, atol=1e-12 * np.abs(theirs).max())
 
 
+@pytest.mark.parametrize("method", ["amg", "jacobi"])
+def test_a_given_first_residual_saves_its_product_and_changes_nothing(system, rhs, method):
+    """r0 = b - A x0 from the caller (the implicit step has it from its warm start): the same iterates bit for bit,
+    one product with the matrix fewer."""
+    matrix, modes, _ = system
+    x0 = np.linalg.solve(np.diag(matrix.diagonal()), rhs)  # a rough guess: a few iterations still to go
+    products = []
+
+    class Counted(sp.bsr_matrix):
+        def __matmul__(self, other):
+            products.append(1)
+            return super().__matmul__(other)
+
+    counted = Counted(matrix)
+    answers = {}
+    for given in (None, rhs - matrix @ x0):
+        solver = make_linear_solver(method, rtol=1e-8)
+        if method == "amg":
+            solver.build(matrix, modes)
+        products.clear()
+        answers[given is None] = solver.solve(counted, rhs, x0=x0, r0=given)
+        answers[given is None] += (len(products),)
+    (x, info, without), (y, info_given, given_count) = answers[True], answers[False]
+    assert x.tobytes() == y.tobytes() and info.iterations == info_given.iterations > 0
+    assert given_count == without - 1
+
+
 def test_the_three_methods_agree(system, rhs):
     matrix, modes, _ = system
     exact = sp.linalg.spsolve(matrix.tocsc(), rhs)

@@ -448,10 +448,10 @@ class ImplicitEuler(Integrator):
                 setup_seconds = self._build(cache, pattern, old, x_b, memory[_KEY + "amg_step"], t_b, h_b, v_b)
 
         history = _history(memory, pattern.size, self.warm_start)
-        warm = _projected_guess(system, b, history) if len(history) and self.method != "direct" else None
+        guess = _projected_guess(system, b, history) if len(history) and self.method != "direct" else None
         solves = []
         if pattern.size:
-            dv, info = self._solve(cache, system, b, warm)
+            dv, info = self._solve(cache, system, b, guess)
             solves.append(info)
         else:
             dv = np.zeros(0)
@@ -494,7 +494,9 @@ class ImplicitEuler(Integrator):
             forces_seconds, assembly_seconds, setup_seconds, sum(info.solve_seconds for info in solves), rebuilt)
         return State(x1, v1, t0 + h, state.step + 1, memory)
 
-    def _solve(self, cache, system, b, warm):
+    def _solve(self, cache, system, b, guess):
+        """The step's velocity change and the solve's info; ``guess``: (x0, b - A x0) or None (from zero)."""
+        warm, residual = guess if guess is not None else (None, None)
         if self.method == "amg":
             # Contact changes from step to step: the fine level of the kept hierarchy gets the current
             # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay; so does a diagonal
@@ -518,7 +520,7 @@ class ImplicitEuler(Integrator):
                     cache.solver.refresh(system.whole)
             else:
                 cache.solver.restore()
-        return cache.solver.solve(system.matrix, b, x0=warm, extra=system.products)
+        return cache.solver.solve(system.matrix, b, x0=warm, extra=system.products, r0=residual)
 
 
 def _history(memory: dict, size: int, depth: int) -> np.ndarray:
@@ -534,12 +536,13 @@ def _history(memory: dict, size: int, depth: int) -> np.ndarray:
     return history[-depth:]
 
 
-def _projected_guess(system: _System, b: np.ndarray, history: np.ndarray) -> np.ndarray | None:
+def _projected_guess(system: _System, b: np.ndarray, history: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """CG's first guess: x0 = X c, the combination of the previous velocity changes X (the rows of ``history``)
     closest to the solution of A x = b in A's energy norm, (X^T A X) c = X^T b (Fischer 1998's projection onto
     previous solutions). No worse in that norm than any extrapolation of them, and than starting from zero; it costs
-    one product with the system per previous change. Directions the changes hardly span (energy below
-    :data:`WARM_START_CUTOFF` of the largest) are left out; None when nothing is left."""
+    one product with the system per previous change, and gives CG its first residual b - A x0 without another.
+    Directions the changes hardly span (energy below :data:`WARM_START_CUTOFF` of the largest) are left out; None
+    when nothing is left."""
     vectors = history.T  # (N, k)
     products = system.matrix @ vectors
     if system.products is not None:
@@ -551,5 +554,5 @@ def _projected_guess(system: _System, b: np.ndarray, history: np.ndarray) -> np.
     kept = energies > WARM_START_CUTOFF * energies[-1]
     directions = directions[:, kept]
     coefficients = directions @ ((directions.T @ (vectors.T @ b)) / energies[kept])
-    return vectors @ coefficients
+    return vectors @ coefficients, b - products @ coefficients
 

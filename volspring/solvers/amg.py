@@ -555,7 +555,8 @@ class AMGConjugateGradient(_LinearSolver):
 
     def solve(self, matrix: sparse.spmatrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
               extra: sparse.spmatrix | None = None, near_null_space: np.ndarray | None = None,
-              prolongation: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolveInfo]:
+              prolongation: sparse.spmatrix | None = None,
+              r0: np.ndarray | None = None) -> tuple[np.ndarray, SolveInfo]:
         """Solve ``(matrix + extra) x = rhs``; returns ``(x, SolveInfo)``.
 
         Parameters
@@ -565,6 +566,8 @@ class AMGConjugateGradient(_LinearSolver):
         rhs : (N,) float
         x0 : (N,) float, optional
             Warm start.
+        r0 : (N,) float, optional
+            rhs - (matrix + extra) x0, when the caller has it (one product fewer; trusted).
         extra : (N, N) sparse or LinearOperator, optional
             Added in every product, left out of the hierarchy (a matrix-free term: anything with ``@``).
         near_null_space, prolongation
@@ -583,7 +586,7 @@ class AMGConjugateGradient(_LinearSolver):
         start = self.timer()
         x, iterations, residual, initial = conjugate_gradient(
             _operator(matrix, extra), rhs, x0=x0, preconditioner=self.precondition, rtol=self.rtol,
-            maxiter=self.maxiter)
+            maxiter=self.maxiter, r0=r0)
         info = SolveInfo("amg", iterations, residual, bool(residual <= self.rtol), self.rtol, initial,
                          setup, self.timer() - start, rebuilt)
         return self._finish(x, info)

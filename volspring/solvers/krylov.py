@@ -64,7 +64,7 @@ class SolveInfo:
 
 def conjugate_gradient(apply: Callable[..., Any], b: ArrayLike, *, x0: ArrayLike | None = None,
                        preconditioner: Callable[..., Any] | None = None, rtol: float = 1e-3,
-                       maxiter: int = 200) -> tuple[np.ndarray, int, float, float]:
+                       maxiter: int = 200, r0: ArrayLike | None = None) -> tuple[np.ndarray, int, float, float]:
     """Preconditioned conjugate gradients for an SPD operator.
 
     Parameters
@@ -81,6 +81,8 @@ def conjugate_gradient(apply: Callable[..., Any], b: ArrayLike, *, x0: ArrayLike
         Stop when ||r|| <= rtol ||b||.
     maxiter : int
         At most this many iterations (one product with A each).
+    r0 : (N,) float, optional
+        b - A x0, when the caller has it already (one product fewer); used only with ``x0``, and trusted.
 
     Returns
     -------
@@ -108,7 +110,7 @@ def conjugate_gradient(apply: Callable[..., Any], b: ArrayLike, *, x0: ArrayLike
         r = b.copy()
     else:
         x = np.array(x0, dtype=np.float64)
-        r = b - apply(x)
+        r = b - apply(x) if r0 is None else np.array(r0, dtype=np.float64)
     norm_r = float(np.linalg.norm(r))
     initial = norm_r / norm_b
     target = rtol * norm_b
@@ -177,7 +179,7 @@ class _LinearSolver:
             logger.warning(message)
         return x, info
 
-    def solve(self, matrix, rhs, *, x0=None, extra=None):  # pragma: no cover - interface
+    def solve(self, matrix, rhs, *, x0=None, extra=None, r0=None):  # pragma: no cover - interface
         raise NotImplementedError
 
 
@@ -196,7 +198,8 @@ class DirectSolver(_LinearSolver):
         super().__init__(rtol=rtol, maxiter=1, on_failure=on_failure, timer=timer)
 
     def solve(self, matrix: sparse.spmatrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
-              extra: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolveInfo]:
+              extra: sparse.spmatrix | None = None,
+              r0: np.ndarray | None = None) -> tuple[np.ndarray, SolveInfo]:
         start = self.timer()
         full = matrix.tocsc() if extra is None else (matrix + extra).tocsc()
         try:
@@ -218,7 +221,8 @@ class JacobiConjugateGradient(_LinearSolver):
     method = "jacobi"
 
     def solve(self, matrix: sparse.spmatrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
-              extra: sparse.spmatrix | None = None) -> tuple[np.ndarray, SolveInfo]:
+              extra: sparse.spmatrix | None = None,
+              r0: np.ndarray | None = None) -> tuple[np.ndarray, SolveInfo]:
         start = self.timer()
         diagonal = matrix.diagonal() if extra is None else matrix.diagonal() + extra.diagonal()
         if not (diagonal > 0).all():
@@ -227,7 +231,7 @@ class JacobiConjugateGradient(_LinearSolver):
         setup = self.timer() - start
         x, iterations, residual, initial = conjugate_gradient(
             _operator(matrix, extra), rhs, x0=x0, preconditioner=inverse.__mul__, rtol=self.rtol,
-            maxiter=self.maxiter)
+            maxiter=self.maxiter, r0=r0)
         info = SolveInfo("jacobi", iterations, residual, bool(residual <= self.rtol), self.rtol, initial,
                          setup, self.timer() - start - setup)
         return self._finish(x, info)
