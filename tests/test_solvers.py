@@ -258,6 +258,24 @@ def test_a_given_first_residual_saves_its_product_and_changes_nothing(system, rh
     assert given_count == without - 1
 
 
+@pytest.mark.parametrize("cells", [(24, 5, 5), (2, 1, 1)])
+def test_build_leaves_the_given_matrix_alone_and_keeps_its_own_copy(system, cells, rhs):
+    """pyamg builds from the caller's canonical matrix without a copy (peak memory), but the caller's matrix gets
+    none of pyamg's cached attributes, and changing it in place afterwards changes nothing in the solver, with
+    several levels (kept as triangles) and with one (kept as a copy)."""
+    matrix, modes, _ = spring_system(cells)
+    matrix.sum_duplicates()
+    attributes = set(vars(matrix))
+    solver = AMGConjugateGradient()
+    solver.build(matrix, modes)
+    assert set(vars(matrix)) == attributes
+    b = rhs[:matrix.shape[0]]
+    before = solver.precondition(b)
+    matrix.data *= 2.0
+    assert solver.precondition(b).tobytes() == before.tobytes()
+    assert pickle.loads(pickle.dumps(solver)).precondition(b).tobytes() == before.tobytes()  # a rebuild, too
+
+
 def test_the_three_methods_agree(system, rhs):
     matrix, modes, _ = system
     exact = sp.linalg.spsolve(matrix.tocsc(), rhs)

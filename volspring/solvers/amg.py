@@ -385,7 +385,14 @@ class AMGConjugateGradient(_LinearSolver):
             aggregation = _block_norms(aggregation)
         self._source = _Source(frozen, near_null_space,
                                None if prolongation is None else sp.csr_matrix(prolongation), aggregation=aggregation)
+        cached = set(vars(matrix))
         self._construct()
+        if frozen is matrix:
+            for name in set(vars(matrix)) - cached:  # pyamg's caches (block_D_inv, symmetry) stay off the caller's matrix
+                delattr(matrix, name)
+            if self._source.matrix is matrix:  # a single level: no triangles replaced it, so keep a copy after all
+                self._source = replace(self._source, matrix=matrix.copy())
+                self._hierarchy.levels[0].A = self._source.matrix
         seconds = self.timer() - start
         logger.debug("built AMG hierarchy: %s levels, operator complexity %.2f, %.3f s",
                      len(self._hierarchy.levels), self._hierarchy.operator_complexity(), seconds)
@@ -517,10 +524,8 @@ class AMGConjugateGradient(_LinearSolver):
         hierarchy, source = self.hierarchy, self._source
         if hierarchy is None or source is None or not self._refreshed:
             return
-        if isinstance(source.matrix, _Triangles):
-            hierarchy.levels[0].A = source.matrix
-        else:
-            hierarchy.levels[0].A = source.matrix
+        hierarchy.levels[0].A = source.matrix
+        if not isinstance(source.matrix, _Triangles):
             self._set_smoothers(hierarchy)
         self._refreshed = False
 
