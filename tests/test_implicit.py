@@ -277,7 +277,7 @@ def test_a_run_resumed_with_a_full_warm_start_history_equals_the_uninterrupted_o
     assert fresh.last_solve.iterations == integrator.last_solve.iterations
 
 
-@pytest.mark.parametrize("depth", [-1, 1.5, True, "5"])
+@pytest.mark.parametrize("depth", [-1, 1.5, True, "5", None])
 def test_warm_start_depth_must_be_a_whole_number(depth):
     with pytest.raises((ValueError, TypeError), match="warm_start"):
         ImplicitEuler(warm_start=depth)

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import logging
 import math
+import numbers
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -245,7 +246,7 @@ class ImplicitEuler(Integrator):
             raise ValueError(f"rebuild_growth = {rebuild_growth!r} is not > 1")
         if rebuild_every is not None and int(rebuild_every) < 1:
             raise ValueError(f"rebuild_every = {rebuild_every!r} is not >= 1")
-        if isinstance(warm_start, bool) or int(warm_start) != warm_start or warm_start < 0:
+        if isinstance(warm_start, bool) or not isinstance(warm_start, numbers.Integral) or warm_start < 0:
             raise ValueError(f"warm_start = {warm_start!r} is not a whole number >= 0 (previous steps to guess from)")
         options: dict[str, Any] = {"on_failure": on_failure}
         if solver != "direct":
