@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import logging
 import math
-import numbers
+import operator
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -246,7 +246,11 @@ class ImplicitEuler(Integrator):
             raise ValueError(f"rebuild_growth = {rebuild_growth!r} is not > 1")
         if rebuild_every is not None and int(rebuild_every) < 1:
             raise ValueError(f"rebuild_every = {rebuild_every!r} is not >= 1")
-        if isinstance(warm_start, bool) or not isinstance(warm_start, numbers.Integral) or warm_start < 0:
+        try:
+            depth = -1 if isinstance(warm_start, bool) else operator.index(warm_start)  # ints, numpy integers
+        except TypeError:
+            depth = -1
+        if depth < 0:
             raise ValueError(f"warm_start = {warm_start!r} is not a whole number >= 0 (previous steps to guess from)")
         options: dict[str, Any] = {"on_failure": on_failure}
         if solver != "direct":
@@ -260,7 +264,7 @@ class ImplicitEuler(Integrator):
         self.rebuild_growth = float(rebuild_growth)
         self.rebuild_every = None if rebuild_every is None else int(rebuild_every)
         self.clamp_compression = bool(clamp_compression)
-        self.warm_start = int(warm_start)
+        self.warm_start = depth
         self.matrix_free = bool(matrix_free) and solver == "amg" and self.clamp_compression
         self.last_solve: ImplicitStepInfo | None = None
         self.cache = self.new_cache()

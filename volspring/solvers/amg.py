@@ -390,9 +390,11 @@ class AMGConjugateGradient(_LinearSolver):
         if frozen is matrix:
             for name in set(vars(matrix)) - cached:  # pyamg's caches (block_D_inv, symmetry) stay off the caller's matrix
                 delattr(matrix, name)
-            if self._source.matrix is matrix:  # a single level: no triangles replaced it, so keep a copy after all
-                self._source = replace(self._source, matrix=matrix.copy())
-                self._hierarchy.levels[0].A = self._source.matrix
+            kept_as_given = self._source.matrix is matrix
+            if kept_as_given:  # a single level: no triangles replaced it, so keep a copy after all
+                copy = matrix.copy()
+                self._source = replace(self._source, matrix=copy)
+                self._hierarchy.levels[0].A = copy
         seconds = self.timer() - start
         logger.debug("built AMG hierarchy: %s levels, operator complexity %.2f, %.3f s",
                      len(self._hierarchy.levels), self._hierarchy.operator_complexity(), seconds)
