@@ -130,7 +130,8 @@ def test_headline_says_which_model_and_integrator_give_which_error_at_what_cost(
     sentence = html.unescape(found.group(1))
     assert page.index('class="headline"') < page.index("<h2")  # on the first screen, above the ladder
     # The rung with the smallest worst error (tip deflection of the static cases, first frequency of the modal
-    # one), its worst error and median cost as in results.json; the springs rung is the cheap end.
+    # one), its worst error and median cost as in results.json, and the rung of the lowest median cost: springs or
+    # lattice, which cost the same to within the timing's noise (0.89-1.18 x springs on the quick meshes).
     worst, costs = {}, {}
     for row in results["ladder"]["rows"]:
         if "refused" in row:
@@ -142,7 +143,9 @@ def test_headline_says_which_model_and_integrator_give_which_error_at_what_cost(
     assert worst[best] >= 0.1  # the quick meshes are coarse: whole percents
     assert f"the {best} rung is the most accurate model, within {100 * worst[best]:.0f}%" in sentence
     assert f"at {np.median(costs[best]):.2g}× the springs rung's cost per implicit Euler step" in sentence
-    assert "the springs rung is the cheapest" in sentence and f"off by up to {100 * worst['springs']:.0f}%" in sentence
+    cheap = min(costs, key=lambda rung: np.median(costs[rung]))
+    assert cheap in ("springs", "lattice"), costs
+    assert f"the {cheap} rung is the cheapest" in sentence and f"off by up to {100 * worst[cheap]:.0f}%" in sentence
     # The integrators: the cheapest stable run with its wall time per simulated second, and the cheapest run
     # that keeps the first frequency within 1%.
     stable = [run for run in results["studies"]["speed"]["runs"] if run["stable"]]
