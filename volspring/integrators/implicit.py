@@ -82,10 +82,11 @@ _KEY = "implicit_euler."
 CONTACT_REBUILD_SHARE = 0.01
 #: CG's first guess is the combination of this many previous velocity changes that is closest to the step's
 #: solution in the system's energy norm (Fischer 1998: projection onto previous solutions). On the README beam
-#: (10k nodes, dt = 0.01 s, steps 11-40 from rest) CG then needs 2.1 iterations a step and the step costs 34 mat-vecs,
-#: against 7.9 and 75 from zero, 5.8 and 60 from the last change alone, 2.3 and 38 from three changes, 1.8 and 38
-#: from eight (each change costs one product with the system; ``python benchmarks/bench_warm_start.py``). The guess
-#: it replaces, the linear extrapolation of the last two changes, needed 5.7 iterations on the same states.
+#: (10k nodes, dt = 0.01 s, steps 11-40 from rest) CG then needs 2.1 iterations a step and the step costs 41 mat-vecs,
+#: against 7.9 and 81 from zero, 5.8 and 66 from the last change alone, 2.3 and 38 from three changes, 1.8 and 45
+#: from eight (each change costs one product with the system; ``python benchmarks/bench_warm_start.py``; the mat-vec
+#: figures vary by a few from run to run). Five rather than three: fewer iterations in the first steps of a motion.
+#: The guess it replaces, the linear extrapolation of the last two changes, needed 5.7 iterations on the same states.
 WARM_START = 5
 #: Directions of the previous changes whose energy is below this share of the largest are left out of the guess
 #: (nearly parallel changes: a rest state, a uniform free fall).
