@@ -19,7 +19,8 @@ Three methods share one interface, ``solver.solve(matrix, rhs, x0=..., extra=...
     Sparse LU (``scipy.sparse.linalg.splu``), for small systems and for checking.
 
 ``extra`` is an optional additional sparse term (e.g. a contact or field Jacobian) applied in
-every CG product but left out of the AMG hierarchy.
+every CG product but left out of the AMG hierarchy. ``r0`` is ``rhs - (matrix + extra) x0`` when the caller
+already has it (the implicit step's warm start does): CG then skips that product.
 
 CG stops when ||b - A x|| <= rtol ||b|| (the recursively updated residual; the criterion of
 ``pyamg.krylov.cg(criteria="rr")`` and of ``scipy.sparse.linalg.cg(rtol=...)``). A solve that
