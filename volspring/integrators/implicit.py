@@ -550,9 +550,9 @@ def _projected_guess(system: _System, b: np.ndarray, history: np.ndarray) -> tup
     Directions the changes hardly span (energy below :data:`WARM_START_CUTOFF` of the largest) are left out; None
     when nothing is left."""
     vectors = history.T  # (N, k)
-    products = system.matrix @ vectors
-    if system.products is not None:
-        products += system.products @ vectors
+    products, applied = system.matrix @ vectors, system.products  # the property builds a new operator per access
+    if applied is not None:
+        products += applied @ vectors
     gram = vectors.T @ products
     energies, directions = np.linalg.eigh(0.5 * (gram + gram.T))
     if not energies[-1] > 0.0:
