@@ -260,9 +260,11 @@ class AMGConjugateGradient(_LinearSolver):
     -----
     The coarsest level (about a thousand unknowns at 50k nodes) is factorised with sparse LU:
     the default pseudo-inverse spent 1.3 s of a 3.9 s setup in a dense SVD, for the same cycle.
-    The candidates B are used as given (``improve_candidates=None``): rigid-body modes are
-    already the near-null space, and relaxing them first doubled the setup time for the same
-    iteration counts (measured on 10k and 50k-node beams).
+    The candidates B are used as given (pyamg's ``improve_candidates`` is not applied): rigid-body
+    modes are already the near-null space, and relaxing them first doubled the setup time for the
+    same iteration counts (measured on 10k and 50k-node beams). The levels are built by
+    :func:`_smoothed_aggregation` from pyamg's aggregation (its builder's own hierarchy to rounding,
+    with fewer copies of the matrix).
 
     The hierarchy is built from an explicit :meth:`build` call (or the first solve) and kept;
     it is a frozen copy, so later refills of the matrix do not disturb it. The V-cycle is
@@ -431,16 +433,15 @@ class AMGConjugateGradient(_LinearSolver):
         else:
             self._set_smoothers(hierarchy)
         self._refreshed = False
-        cycle = _v_cycle(hierarchy)
-        size = hierarchy.levels[0].A.shape[0]
+        coarsest = hierarchy.levels[-1].A
         try:
-            cycle(np.zeros(size))  # the coarse solver sets up lazily: count it here
+            hierarchy.coarse_solver(coarsest, np.zeros(coarsest.shape[0]))  # it factorises lazily: count it here
         except RuntimeError:  # a singular coarsest matrix (statics of a barely held body): pseudo-inverse
             from pyamg.multilevel import coarse_grid_solver
 
             hierarchy.coarse_solver = coarse_grid_solver("pinv")
-            cycle(np.zeros(size))
-        self._hierarchy, self._cycle = hierarchy, cycle
+            hierarchy.coarse_solver(coarsest, np.zeros(coarsest.shape[0]))
+        self._hierarchy, self._cycle = hierarchy, _v_cycle(hierarchy)
         self.build_count += 1
 
     def _set_smoothers(self, hierarchy) -> None:

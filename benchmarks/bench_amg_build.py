@@ -1,0 +1,123 @@
+"""One AMG build in sparse mat-vecs: pyamg's smoothed-aggregation builder against the set-up done here, one run.
+
+The README beam (1 m x 0.2 m x 0.2 m, structured cells 5k x k x k, pinned at x = 0, gravity; E = 1e7 Pa, nu = 0.45;
+springs), the system of its first implicit step at the README's dt = 0.01 s. Per size, alternating ``--rounds``
+times in this process (CPU time, one thread):
+
+- ``pyamg``: ``pyamg.smoothed_aggregation_solver`` with the options the solver used before (six rigid-body modes,
+  symmetric strength 0.05, Jacobi prolongation smoothing with local weights, sparse LU on the coarsest level);
+- ``ours``: :func:`volspring.solvers.amg._smoothed_aggregation`, the same hierarchy to rounding;
+- ``build()``: the whole :meth:`AMGConjugateGradient.build` (the set-up, the levels' triangles, the coarse LU),
+  what a step that rebuilds pays;
+
+each as the median over the rounds in mat-vecs with the same matrix, and the share of ``ours`` spent in scipy's
+block sparse products (the prolongation smoothing's A T and the Galerkin products R A P).
+
+Run (numpy/scipy threads are held to one before numpy is imported)::
+
+    python benchmarks/bench_amg_build.py                 # k = 5, 12, 20: about 1k, 10k and 45k nodes
+    python benchmarks/bench_amg_build.py --cells 34 --rounds 2
+
+This is a script, not a test.
+"""
+
+import os
+
+for _variable in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "VECLIB_MAXIMUM_THREADS"):
+    os.environ[_variable] = "1"
+
+import argparse  # noqa: E402
+import statistics  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pyamg  # noqa: E402
+import scipy.sparse._bsr as scipy_bsr  # noqa: E402
+
+from meshing import structured_box  # noqa: E402
+from meshing.geometry import rigid_body_modes  # noqa: E402
+from volspring import Gravity, Material, Model, Pins, Scene  # noqa: E402
+from volspring.integrators.implicit import ImplicitEuler  # noqa: E402
+from volspring.solvers import PROLONGATION_OMEGA, AMGConjugateGradient  # noqa: E402
+from volspring.solvers.amg import _smoothed_aggregation  # noqa: E402
+
+MATERIAL = Material(1e7, 0.45, 1000.0)
+
+
+def matvec_seconds(matrix, seconds=0.5):
+    """CPU seconds of one product with ``matrix``, repeated for at least ``seconds``."""
+    vector, start, count = np.ones(matrix.shape[0]), time.process_time(), 0
+    while time.process_time() - start < seconds:
+        matrix @ vector
+        count += 1
+    return (time.process_time() - start) / count
+
+
+def pyamg_builder(matrix, modes):
+    gauss_seidel = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
+    return pyamg.smoothed_aggregation_solver(
+        matrix, B=modes, symmetry="hermitian", strength=("symmetric", {"theta": 0.05}),
+        smooth=("jacobi", {"omega": PROLONGATION_OMEGA, "weighting": "local"}), improve_candidates=None,
+        presmoother=gauss_seidel[0], postsmoother=gauss_seidel[1], max_coarse=300, coarse_solver="splu")
+
+
+def ours(matrix, modes):
+    return _smoothed_aggregation(matrix, modes, theta=0.05, aggregation=None, max_coarse=300)
+
+
+def whole_build(matrix, modes):
+    AMGConjugateGradient(timer=time.process_time).build(matrix, modes)
+
+
+class ProductClock:
+    """CPU seconds spent in scipy's block sparse product while installed."""
+
+    def __init__(self):
+        self.seconds, self._product = 0.0, scipy_bsr.bsr_matmat
+
+    def __enter__(self):
+        def timed(*args):
+            start = time.process_time()
+            try:
+                return self._product(*args)
+            finally:
+                self.seconds += time.process_time() - start
+
+        scipy_bsr.bsr_matmat = timed
+        return self
+
+    def __exit__(self, *exc):
+        scipy_bsr.bsr_matmat = self._product
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cells", type=int, nargs="+", default=[5, 12, 20], help="k of the 5k x k x k cells")
+    parser.add_argument("--rounds", type=int, default=4, help="alternating builds per variant")
+    args = parser.parse_args()
+    print(f"{'nodes':>8} {'pyamg':>10} {'ours':>10} {'ratio':>6} {'build()':>10} {'products in ours':>17}")
+    for k in args.cells:
+        mesh = structured_box((5 * k, k, k), (1.0, 0.2, 0.2))
+        model = Model.from_mesh(mesh, MATERIAL)
+        scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+        matrix, _, pattern = ImplicitEuler().linear_system(scene, scene.initial_state(), 0.01)
+        modes = rigid_body_modes(model.rest_positions[pattern.free_nodes])
+        mv = matvec_seconds(matrix)
+        seconds = {name: [] for name in ("pyamg", "ours", "build")}
+        products = []
+        for _ in range(args.rounds):
+            for name, build in (("pyamg", pyamg_builder), ("ours", ours), ("build", whole_build)):
+                given = matrix.copy()  # pyamg caches on the matrix it is given
+                with ProductClock() as clock:
+                    start = time.process_time()
+                    build(given, modes)
+                    seconds[name].append(time.process_time() - start)
+                if name == "ours":
+                    products.append(clock.seconds / seconds[name][-1])
+        pyamg_mv, ours_mv, build_mv = (statistics.median(seconds[name]) / mv for name in ("pyamg", "ours", "build"))
+        print(f"{len(mesh.points):>8} {pyamg_mv:>7.0f} mv {ours_mv:>7.0f} mv {ours_mv / pyamg_mv:>6.2f} "
+              f"{build_mv:>7.0f} mv {100 * statistics.median(products):>16.0f}%", flush=True)
+
+
+if __name__ == "__main__":
+    main()
