@@ -34,23 +34,13 @@ import numpy as np  # noqa: E402
 import pyamg  # noqa: E402
 import scipy.sparse._bsr as scipy_bsr  # noqa: E402
 
+from bench_warm_start import MATERIAL, matvec_seconds  # noqa: E402
 from meshing import structured_box  # noqa: E402
 from meshing.geometry import rigid_body_modes  # noqa: E402
-from volspring import Gravity, Material, Model, Pins, Scene  # noqa: E402
+from volspring import Gravity, Model, Pins, Scene  # noqa: E402
 from volspring.integrators.implicit import ImplicitEuler  # noqa: E402
 from volspring.solvers import PROLONGATION_OMEGA, AMGConjugateGradient  # noqa: E402
 from volspring.solvers.amg import _smoothed_aggregation  # noqa: E402
-
-MATERIAL = Material(1e7, 0.45, 1000.0)
-
-
-def matvec_seconds(matrix, seconds=0.5):
-    """CPU seconds of one product with ``matrix``, repeated for at least ``seconds``."""
-    vector, start, count = np.ones(matrix.shape[0]), time.process_time(), 0
-    while time.process_time() - start < seconds:
-        matrix @ vector
-        count += 1
-    return (time.process_time() - start) / count
 
 
 def pyamg_builder(matrix, modes):
