@@ -449,10 +449,8 @@ class AMGConjugateGradient(_LinearSolver):
         level's block sweeps, or block Jacobi weighted by a bound per level (``self.smoother``)."""
         from pyamg.relaxation.smoothing import change_smoothers
 
-        if self.smoother == "gauss_seidel" and len(hierarchy.levels) > 1:
-            return  # the finest level's point-wise sweeps take the matrix they are given
-        if len(hierarchy.levels) == 1:
-            return  # the coarse solver alone
+        if self.smoother == "gauss_seidel" or len(hierarchy.levels) == 1:
+            return  # the point-wise sweeps take the matrix they are given; one level is the coarse solver alone
         if self.smoother == "block_gauss_seidel":
             pre, post = ("block_gauss_seidel", {"sweep": "forward"}), ("block_gauss_seidel", {"sweep": "backward"})
             change_smoothers(hierarchy, [pre], [post])
@@ -612,11 +610,11 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
     smoothers yet): pyamg's aggregation and tentative prolongation, the prolongation smoothing and Galerkin products
     done here.
 
-    Each level: the symmetric strength of connection with ``theta`` between the Frobenius norms of the blocks (on the
-    finest level those of ``aggregation`` when given; every block kept at theta 0), pyamg's standard aggregation, the tentative prolongator
-    T fitted to the candidates, P = T - omega D^-1 (A T) with D the row sums of |A| (pyamg's ``"local"``
-    weighting; omega = :data:`PROLONGATION_OMEGA`), R = P^T and the coarse matrix R A P, until at most
-    ``max_coarse`` unknowns per block size remain (at most ten levels, pyamg's default).
+    Each level: the symmetric strength of connection with ``theta`` between the Frobenius norms of the blocks (on
+    the finest level those of ``aggregation`` when given; every block kept at theta 0), pyamg's standard
+    aggregation, the tentative prolongator T fitted to the candidates, P = T - omega D^-1 (A T) with D the row sums
+    of |A| (pyamg's ``"local"`` weighting; omega = :data:`PROLONGATION_OMEGA`), R = P^T and the coarse matrix
+    R A P, until at most ``max_coarse`` unknowns per block size remain (at most ten levels, pyamg's default).
 
     The coarse matrices' block columns are sorted before they are aggregated (pyamg leaves a Galerkin product's
     as they come, and its aggregation visits a node's neighbours in stored order, so on a coarse level the two can
