@@ -52,7 +52,7 @@ def pyamg_builder(matrix, modes):
 
 
 def ours(matrix, modes):
-    return _smoothed_aggregation(matrix, modes, theta=0.05, aggregation=None, max_coarse=300)
+    return _smoothed_aggregation(matrix, modes, theta=0.05, excluded=None, max_coarse=300)
 
 
 def whole_build(matrix, modes):

@@ -134,6 +134,41 @@ def test_restore_puts_the_built_matrix_back_after_a_refresh(system, rhs, smoothe
     assert pickle.loads(pickle.dumps(solver)).precondition(rhs).tobytes() == built.tobytes()
 
 
+def _contact_like_change(size, rng):
+    """(size, size) CSR: a symmetric positive semi-definite coupling of two 3-unknown nodes far apart, as contact
+    adds (k (u_a - u_b)(u_a - u_b)^T along a random direction), with a stiffness near the matrix's diagonal."""
+    direction = rng.normal(size=3)
+    direction /= np.linalg.norm(direction)
+    a, b = 3 * 7, size - 3 * 11  # two nodes at the ends of the bar
+    rows = np.r_[a:a + 3, b:b + 3]
+    vector = np.r_[direction, -direction]
+    dense = 50.0 * np.outer(vector, vector)
+    change = sp.coo_matrix((dense.ravel(), (np.repeat(rows, 6), np.tile(rows, 6))), shape=(size, size))
+    return change.tocsr()
+
+
+def _whole(matrix):
+    return matrix.whole() if isinstance(matrix, _Triangles) else matrix
+
+
+def test_the_finest_prolongator_is_smoothed_without_the_excluded_couplings(system):
+    """build(matrix, aggregation=A0), matrix = A0 + C: the finest level's aggregates and the smoothing of its
+    prolongator come from A0 (to rounding: A0 is recovered as matrix - (matrix - A0)), the Galerkin product from
+    the matrix with C."""
+    matrix, modes, _ = system
+    change = _contact_like_change(matrix.shape[0], np.random.default_rng(6))
+    with_change = sp.bsr_matrix(matrix + change, blocksize=(3, 3))
+    plain, given = AMGConjugateGradient(), AMGConjugateGradient()
+    plain.build(matrix, modes)
+    given.build(with_change, modes, aggregation=matrix)
+    P, expected = given.hierarchy.levels[0].P.toarray(), plain.hierarchy.levels[0].P.toarray()
+    # Rounding of (A0 + C) - C against A0, entries of order one in P (measured 0 to 1e-16).
+    assert P.shape == expected.shape and np.abs(P - expected).max() <= 1e-12
+    coarse = _whole(given.hierarchy.levels[1].A).toarray()
+    galerkin = P.T @ with_change.toarray() @ P
+    assert np.abs(coarse - galerkin).max() <= 1e-12 * np.abs(galerkin).max()  # the same sums, another order
+
+
 @pytest.mark.parametrize("theta", [0.05, 0.0])
 def test_aggregation_by_the_matrix_itself_builds_the_same_hierarchy(system, rhs, theta):
     """build(aggregation=A) measures the couplings by the 3x3 blocks' Frobenius norms, as pyamg does for a BSR
@@ -143,7 +178,7 @@ def test_aggregation_by_the_matrix_itself_builds_the_same_hierarchy(system, rhs,
     plain.build(matrix, modes)
     given.build(matrix, modes, aggregation=matrix.tocsr())
     assert given.precondition(rhs).tobytes() == plain.precondition(rhs).tobytes()
-    # And after pickling (the block norms travel with the solver).
+    # And after pickling (nothing is excluded: the pickle rebuilds the plain hierarchy).
     assert pickle.loads(pickle.dumps(given)).precondition(rhs).tobytes() == plain.precondition(rhs).tobytes()
     with pytest.raises(ValueError, match="aggregation must have the matrix's shape"):
         AMGConjugateGradient().build(matrix, modes, aggregation=matrix.tocsr()[:30, :30])
@@ -159,7 +194,7 @@ def test_the_hierarchy_is_pyamgs_smoothed_aggregation_to_rounding(system, theta,
     from volspring.solvers.amg import PROLONGATION_OMEGA, _smoothed_aggregation
 
     matrix, modes, _ = system
-    ours = _smoothed_aggregation(matrix, modes, theta=theta, aggregation=None, max_coarse=max_coarse).levels
+    ours = _smoothed_aggregation(matrix, modes, theta=theta, excluded=None, max_coarse=max_coarse).levels
     theirs = pyamg.smoothed_aggregation_solver(
         matrix.copy(), B=modes, symmetry="hermitian", strength=("symmetric", {"theta": theta}),
         smooth=("jacobi", {"omega": PROLONGATION_OMEGA, "weighting": "local"}), improve_candidates=None,

@@ -27,6 +27,8 @@ SMOOTHERS = ("gauss_seidel", "block_gauss_seidel", "jacobi")
 #: Weight of the Jacobi prolongation smoother under row-wise Gershgorin weights (see
 #: :class:`AMGConjugateGradient`: why not pyamg's random-start spectral radius, and the measurements).
 PROLONGATION_OMEGA = 2.0
+#: Entries of A - C below this share of C's are rounding (see :func:`_smoothed_aggregation`).
+_SEPARATION_ROUNDING = 1e-10
 #: Weight of the block Jacobi smoother, divided by a Gershgorin bound of D^-1 A on each level.
 BLOCK_JACOBI_OMEGA = 2.0 / 3.0
 
@@ -215,9 +217,9 @@ class _Source:
     matrix: sp.spmatrix | _Triangles
     near_null_space: np.ndarray   # (N, k) or, with a prolongation, (n, k)
     prolongation: sp.spmatrix | None = None  # (N, n): coarse space of a two-level cycle
-    # (nodes, nodes) Frobenius norms of the 3x3 blocks of the matrix whose couplings decide the finest level's
-    # aggregates, when that is not ``matrix`` (build's ``aggregation``); None: ``matrix``'s own.
-    aggregation: sp.csr_matrix | None = None
+    # The couplings of ``matrix`` that neither decide the aggregates nor smooth the prolongators: the matrix minus the
+    # build's ``aggregation`` (contact, a few rows), CSR; None: none.
+    excluded: sp.csr_matrix | None = None
 
 
 class AMGConjugateGradient(_LinearSolver):
@@ -353,13 +355,19 @@ class AMGConjugateGradient(_LinearSolver):
         prolongation : (N, n) sparse, optional
             Coarse space of a two-level cycle (see the class docstring).
         aggregation : (N, N) sparse, optional
-            The matrix whose couplings decide the finest level's aggregates (default ``matrix``), with the same
-            3x3 blocks, for couplings that should not join nodes into one aggregate: contact between two bodies.
-            An aggregate across a contact interface makes both sides move as one rigid piece in the coarse space,
-            which they do not (they slide and part): on a cube resting on another, a hierarchy aggregated with the
-            contact needed 10-13 CG iterations where the same step without contact needed 6, and 5-6 aggregated
-            without it (``benchmarks/bench_contact_cg.py``). The coarse operators are the Galerkin products of
-            ``matrix``, contact included.
+            The matrix whose couplings decide the aggregates and smooth the prolongators (default ``matrix``),
+            equal to ``matrix`` but in a few rows, for couplings that should not join nodes into one aggregate:
+            contact between two bodies. Their difference C = ``matrix`` - ``aggregation`` is kept out of every
+            level: level k + 1 aggregates and smooths by its Galerkin matrix minus P_k^T C_k P_k. The coarse
+            operators are the Galerkin products of ``matrix``, contact included.
+
+            Why: an aggregate across a contact interface makes both sides move as one rigid piece in the coarse
+            space, which they do not (they slide and part). On a cube resting on another (729 nodes each), a
+            hierarchy aggregated with the contact needed 10-13 CG iterations where the same step without contact
+            needed 6, and 5-6 aggregated without it on the finest level (``benchmarks/bench_contact_cg.py``). At
+            4,913 nodes a cube the first coarse level's own aggregates crossed the interface: 12 iterations with the
+            contact kept out of the finest level only, 8 with it kept out of every level (6 without contact). A
+            prolongator smoothed with the contact spreads each aggregate across the interface too.
         """
         start = self.timer()
         near_null_space = np.ascontiguousarray(near_null_space, dtype=np.float64)
@@ -379,14 +387,17 @@ class AMGConjugateGradient(_LinearSolver):
             # Canonical (sorted, summed) up front: pyamg sorts the indices in place, and a hierarchy rebuilt
             # from the sorted matrix (after unpickling) would otherwise differ from one built before.
             frozen.sum_duplicates()
+        excluded = None
         if aggregation is not None:
             if prolongation is not None or aggregation.shape != matrix.shape:
                 given = " with a prolongation" if prolongation is not None else ""
                 raise ValueError(f"aggregation must have the matrix's shape {matrix.shape} and no prolongation; got "
                                  f"shape {aggregation.shape}{given}")
-            aggregation = _block_norms(aggregation)
+            excluded = sp.csr_matrix(matrix) - sp.csr_matrix(aggregation)  # exact zeros where they agree
+            excluded.eliminate_zeros()
+            excluded = excluded if excluded.nnz else None
         self._source = _Source(frozen, near_null_space,
-                               None if prolongation is None else sp.csr_matrix(prolongation), aggregation=aggregation)
+                               None if prolongation is None else sp.csr_matrix(prolongation), excluded=excluded)
         cached = set(vars(matrix))
         self._construct()
         if frozen is matrix:
@@ -413,11 +424,11 @@ class AMGConjugateGradient(_LinearSolver):
         elif isinstance(matrix, _Triangles):  # a rebuild
             matrix = matrix.whole()
         hierarchy = _smoothed_aggregation(matrix, source.near_null_space, theta=self.strength_theta,
-                                          aggregation=source.aggregation, max_coarse=self.max_coarse)
+                                          excluded=source.excluded, max_coarse=self.max_coarse)
         if self.strength_theta and hierarchy.operator_complexity() > 2.5:
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
             hierarchy = _smoothed_aggregation(matrix, source.near_null_space, theta=0.0,
-                                              aggregation=source.aggregation, max_coarse=self.max_coarse)
+                                              excluded=source.excluded, max_coarse=self.max_coarse)
         del matrix  # the whole matrix made from kept triangles goes once the hierarchy is built (peak memory)
         if self.smoother == "gauss_seidel" and len(hierarchy.levels) > 1:
             finest = hierarchy.levels[0].A
@@ -604,17 +615,19 @@ def _block_norms(matrix, blocksize: int = 3) -> sp.csr_matrix:
     return sp.csr_matrix((norms, blocks.indices, blocks.indptr), shape=(nodes, nodes))
 
 
-def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, aggregation: sp.csr_matrix | None,
+def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, excluded: sp.csr_matrix | None,
                           max_coarse: int):
     """The smoothed-aggregation hierarchy of ``matrix`` (a pyamg ``MultilevelSolver``, coarse solver sparse LU, no
     smoothers yet): pyamg's aggregation and tentative prolongation, the prolongation smoothing and Galerkin products
     done here.
 
-    Each level: the symmetric strength of connection with ``theta`` between the Frobenius norms of the blocks (on
-    the finest level those of ``aggregation`` when given; every block kept at theta 0), pyamg's standard
-    aggregation, the tentative prolongator T fitted to the candidates, P = T - omega D^-1 (A T) with D the row sums
-    of |A| (pyamg's ``"local"`` weighting; omega = :data:`PROLONGATION_OMEGA`), R = P^T and the coarse matrix
-    R A P, until at most ``max_coarse`` unknowns per block size remain (at most ten levels, pyamg's default).
+    Each level: the symmetric strength of connection with ``theta`` between the Frobenius norms of the blocks
+    (every block kept at theta 0), pyamg's standard aggregation, the tentative prolongator T fitted to the
+    candidates, P = T - omega D^-1 (A T) with D the row sums of |A| (pyamg's ``"local"`` weighting; omega =
+    :data:`PROLONGATION_OMEGA`), R = P^T and the coarse matrix R A P, until at most ``max_coarse`` unknowns per
+    block size remain (at most ten levels, pyamg's default). With ``excluded`` C (see
+    :meth:`AMGConjugateGradient.build`'s ``aggregation``) the strength and the smoothing of P take A - C, and the
+    next level's C is P^T C P (:func:`_galerkin_rows`); R A P takes all of A.
 
     The coarse matrices' block columns are sorted before they are aggregated (pyamg leaves a Galerkin product's
     as they come, and its aggregation visits a node's neighbours in stored order, so on a coarse level the two can
@@ -635,8 +648,11 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
     level.A, level.B = matrix, near_null_space
     levels = [level]
     while len(levels) < 10 and matrix.shape[0] // get_blocksize(matrix) > max_coarse:
-        couplings = aggregation if len(levels) == 1 and aggregation is not None else \
-            _block_norms(matrix) if matrix.format == "bsr" else sp.csr_matrix(matrix)
+        smoothing = matrix if excluded is None else _without(matrix, excluded)  # decides aggregates, smooths P
+        couplings = _block_norms(smoothing) if smoothing.format == "bsr" else sp.csr_matrix(smoothing)
+        if excluded is not None:  # drop the couplings that only the excluded part made (from a copy: the block norms
+            couplings = couplings.copy()  # share their index arrays with the smoothing matrix)
+            couplings.eliminate_zeros()
         strength = symmetric_strength_of_connection(couplings, theta) if theta else \
             sp.csr_matrix((np.ones(couplings.nnz), couplings.indices, couplings.indptr), shape=couplings.shape)
         del couplings
@@ -644,10 +660,11 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
         del strength
         tentative, candidates = fit_candidates(aggregates, level.B)
         del aggregates
-        row_sums = _absolute(matrix) @ np.ones(matrix.shape[0])
+        row_sums = _absolute(smoothing) @ np.ones(matrix.shape[0])
         weights = np.zeros_like(row_sums)
         np.divide(PROLONGATION_OMEGA, row_sums, out=weights, where=row_sums != 0)
-        correction = matrix @ tentative
+        correction = smoothing @ tentative
+        del smoothing
         if correction.format != "bsr":
             correction = correction.tobsr(blocksize=tentative.blocksize)
         scale_rows(correction, weights, copy=False)
@@ -655,11 +672,63 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
         del tentative, correction
         level.R = level.P.T
         coarse = level.R @ matrix @ level.P
+        if excluded is not None:  # kept out of every level, not only the finest
+            excluded = _galerkin_rows(level.P, excluded)
+            excluded.eliminate_zeros()
+            excluded = excluded if excluded.nnz else None
         level = MultilevelSolver.Level()
         level.A, level.B = coarse, candidates
         levels.append(level)
         matrix = coarse
     return MultilevelSolver(levels, coarse_solver="splu")
+
+
+def _without(matrix, excluded: sp.csr_matrix):
+    """``matrix`` - ``excluded`` on ``matrix``'s own pattern (a CSR or BSR copy), for an ``excluded`` stored within it.
+
+    Below the finest level both are Galerkin products, and a coupling that only ``excluded`` made (across a contact
+    interface) leaves rounding where the difference is 0: entries below :data:`_SEPARATION_ROUNDING` of the
+    excluded one are set to 0 (rounding is about 1e-16 of it, and a coupling that small would not move P)."""
+    if not matrix.has_canonical_format:
+        matrix.sum_duplicates()  # sorted in place, as the block norms would sort it (a Galerkin product's are not)
+    excluded = excluded.tocoo()
+    size = matrix.blocksize[0] if matrix.format == "bsr" else 1
+    blocks = len(matrix.indptr) - 1
+    keys = np.repeat(np.arange(blocks, dtype=np.int64), np.diff(matrix.indptr)) * blocks + matrix.indices
+    wanted = (excluded.row // size).astype(np.int64) * blocks + excluded.col // size
+    position = np.searchsorted(keys, wanted)  # the canonical matrix's blocks are sorted by (row, column)
+    if not (position < len(keys)).all() or not (keys[np.minimum(position, len(keys) - 1)] == wanted).all():
+        raise ValueError("the excluded couplings must lie within the matrix's pattern")
+    data = matrix.data.copy()
+    flat = data.reshape(len(keys), -1)
+    entry = (excluded.row % size) * size + excluded.col % size
+    np.subtract.at(flat, (position, entry), excluded.data)
+    residue = np.abs(flat[position, entry]) <= _SEPARATION_ROUNDING * np.abs(excluded.data)
+    flat[position[residue], entry[residue]] = 0.0
+    kind = sp.bsr_matrix if matrix.format == "bsr" else sp.csr_matrix
+    return kind((data, matrix.indices, matrix.indptr), shape=matrix.shape)
+
+
+def _galerkin_rows(prolongation, change: sp.csr_matrix) -> sp.csr_matrix:
+    """P^T C P for a symmetric ``change`` C that is zero outside a few rows (and so columns): the product of the
+    rows of P that C touches only (CSR, the coarse level's size). Block products where P is a BSR matrix: at 9,826
+    nodes with 2,811 contact rows, 9 and 7 mat-vecs on the first two levels against 20 and 17 with CSR."""
+    blocked = prolongation.format == "bsr"
+    size = prolongation.blocksize[0] if blocked else 1
+    blocks = np.unique(np.flatnonzero(np.diff(change.indptr)) // size)  # block rows of P that C touches
+    rows = (size * blocks[:, None] + np.arange(size)).ravel()
+    sub = change[rows][:, rows]
+    if blocked:  # those block rows of P, without converting all of it
+        starts = prolongation.indptr[blocks]
+        counts = prolongation.indptr[blocks + 1] - starts
+        indptr = np.concatenate([[0], np.cumsum(counts)])
+        picked = np.arange(indptr[-1]) + np.repeat(starts - indptr[:-1], counts)  # each row's stored blocks
+        touched = sp.bsr_matrix((prolongation.data[picked], prolongation.indices[picked], indptr),
+                                shape=(len(rows), prolongation.shape[1]))
+        sub = sp.bsr_matrix(sub, blocksize=(size, size))
+    else:
+        touched = sp.csr_matrix(prolongation)[rows]
+    return sp.csr_matrix(touched.T @ sub @ touched)
 
 
 def _absolute(matrix):
