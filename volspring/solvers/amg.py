@@ -668,7 +668,7 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
         if correction.format != "bsr":
             correction = correction.tobsr(blocksize=tentative.blocksize)
         scale_rows(correction, weights, copy=False)
-        level.P = tentative - correction
+        level.P = _minus_plus_tentative(correction, tentative)
         del tentative, correction
         level.R = level.P.T
         coarse = level.R @ matrix @ level.P
@@ -681,6 +681,26 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
         levels.append(level)
         matrix = coarse
     return MultilevelSolver(levels, coarse_solver="splu")
+
+
+def _minus_plus_tentative(correction: sp.bsr_matrix, tentative: sp.bsr_matrix) -> sp.bsr_matrix:
+    """T - C in place of C (returned), for a C = omega D^-1 A T whose pattern holds T's blocks (A has its diagonal).
+
+    Each block row of T holds at most one block (its node's aggregate), found in C's row by comparing columns.
+    scipy's ``T - C`` allocates room for both operands' blocks and keeps it (the prolongator of the README beam
+    at 45k nodes was held in an array 23% larger than its blocks), and is one more P-sized array at the build's
+    peak."""
+    rows = len(correction.indptr) - 1
+    aggregate = np.full(rows, -1, dtype=np.int64)  # T's column block in each block row, -1 for none
+    holds = np.diff(tentative.indptr) > 0
+    aggregate[holds] = tentative.indices[tentative.indptr[:-1][holds]]
+    row_of_block = np.repeat(np.arange(rows), np.diff(correction.indptr))
+    position = np.flatnonzero(correction.indices == aggregate[row_of_block])
+    if len(position) != holds.sum():
+        raise ValueError("the tentative prolongator has blocks outside the correction's pattern")
+    np.negative(correction.data, out=correction.data)
+    correction.data[position] += tentative.data[tentative.indptr[:-1][holds]]
+    return correction
 
 
 def _without(matrix, excluded: sp.csr_matrix):
