@@ -654,22 +654,30 @@ def test_a_rigid_floors_contact_reaches_the_finest_level_of_the_hierarchy():
     assert (finest != matrix).nnz == 0  # this step's system, its contact stiffness included
 
 
+def pressed_cubes(shift):
+    """Two 343-node cubes of rubber, the upper one shifted by ``shift`` (x, y) and 1 mm into the lower one (pinned at
+    its base), pressed by a gravity of 100 m/s^2: (scene, its contact force)."""
+    from meshing import structured_box
+
+    material = Material(E=1e7, nu=0.45, density=1000.0)
+    cube = structured_box((6, 6, 6), (0.2, 0.2, 0.2))
+    model = Model.from_bodies([Body(cube, material), Body(cube, material, translation=(*shift, 0.199))])
+    contact = ContactForce(model)
+    pins = Pins(np.flatnonzero(model.rest_positions[:, 2] == 0))
+    return Scene(model, forces=[Gravity(g=(0.0, 0.0, -100.0)), contact], pins=pins), contact
+
+
 def test_aggregates_do_not_cross_a_contact_interface():
     """A cube pressed onto another: aggregates of the finest AMG level joined across the contact make both sides
     move as one rigid piece in the coarse space, and CG needed 10 iterations where the same system without contact
     needs 6. Aggregated by the couplings of the system without the contact (the integrator's build), it needs what
     the contact-free system needs, give or take one."""
-    from meshing import structured_box
     from meshing.geometry import rigid_body_modes
     from volspring.solvers import AMGConjugateGradient
     from volspring.solvers.krylov import conjugate_gradient
 
-    material = Material(E=1e7, nu=0.45, density=1000.0)
-    cube = structured_box((6, 6, 6), (0.2, 0.2, 0.2))
-    model = Model.from_bodies([Body(cube, material), Body(cube, material, translation=(0.03, 0.02, 0.199))])
-    contact = ContactForce(model)
-    pins = Pins(np.flatnonzero(model.rest_positions[:, 2] == 0))
-    scene = Scene(model, forces=[Gravity(g=(0.0, 0.0, -100.0)), contact], pins=pins)
+    scene, contact = pressed_cubes((0.03, 0.02))
+    model, pins = scene.model, scene.pins
     integrator = make_integrator("implicit_euler")
     state = scene.initial_state()
     for _ in range(3):
@@ -700,16 +708,11 @@ def test_no_level_of_the_hierarchy_joins_two_bodies_in_contact():
     coarse level aggregated its Galerkin matrix, contact included, and joined the bodies: on two 4,913-node cubes
     pressed together a new build needed 12 CG iterations where the system without contact needs 6 (8 now)."""
     import scipy.sparse as sp
-    from meshing import structured_box
     from meshing.geometry import rigid_body_modes
     from volspring.solvers import AMGConjugateGradient
 
-    material = Material(E=1e7, nu=0.45, density=1000.0)
-    cube = structured_box((6, 6, 6), (0.2, 0.2, 0.2))
-    model = Model.from_bodies([Body(cube, material), Body(cube, material, translation=(0.0, 0.0, 0.199))])
-    contact = ContactForce(model)
-    pins = Pins(np.flatnonzero(model.rest_positions[:, 2] == 0))
-    scene = Scene(model, forces=[Gravity(g=(0.0, 0.0, -100.0)), contact], pins=pins)
+    scene, contact = pressed_cubes((0.0, 0.0))
+    model = scene.model
     integrator = make_integrator("implicit_euler")
     state = integrator.step(scene, scene.initial_state(), 0.01)
     assert contact.contacts(state.x).count > 50
