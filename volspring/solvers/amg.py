@@ -684,7 +684,8 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
 
 
 def _minus_plus_tentative(correction: sp.bsr_matrix, tentative: sp.bsr_matrix) -> sp.bsr_matrix:
-    """T - C in place of C (returned), for a C = omega D^-1 A T whose pattern holds T's blocks (A has its diagonal).
+    """T - C, in place of C when C = omega D^-1 A T holds T's blocks (A has its diagonal; BSR products keep zero
+    blocks), else by scipy (a CSR product drops the zeros A T has inside an aggregate of a scalar problem).
 
     Each block row of T holds at most one block (its node's aggregate), found in C's row by comparing columns.
     scipy's ``T - C`` allocates room for both operands' blocks and keeps it (the prolongator of the README beam
@@ -697,7 +698,7 @@ def _minus_plus_tentative(correction: sp.bsr_matrix, tentative: sp.bsr_matrix) -
     row_of_block = np.repeat(np.arange(rows), np.diff(correction.indptr))
     position = np.flatnonzero(correction.indices == aggregate[row_of_block])
     if len(position) != holds.sum():
-        raise ValueError("the tentative prolongator has blocks outside the correction's pattern")
+        return tentative - correction
     np.negative(correction.data, out=correction.data)
     correction.data[position] += tentative.data[tentative.indptr[:-1][holds]]
     return correction
