@@ -641,46 +641,63 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
     """
     from pyamg.aggregation import fit_candidates, standard_aggregation
     from pyamg.multilevel import MultilevelSolver
-    from pyamg.strength import symmetric_strength_of_connection
-    from pyamg.util.utils import get_blocksize, scale_rows
+    from pyamg.util.utils import get_blocksize
 
     level = MultilevelSolver.Level()
     level.A, level.B = matrix, near_null_space
     levels = [level]
     while len(levels) < 10 and matrix.shape[0] // get_blocksize(matrix) > max_coarse:
-        smoothing = matrix if excluded is None else _without(matrix, excluded)  # decides aggregates, smooths P
-        couplings = _block_norms(smoothing) if smoothing.format == "bsr" else sp.csr_matrix(smoothing)
-        if excluded is not None:  # drop the couplings that only the excluded part made (from a copy: the block norms
-            couplings = couplings.copy()  # share their index arrays with the smoothing matrix)
-            couplings.eliminate_zeros()
-        strength = symmetric_strength_of_connection(couplings, theta) if theta else \
-            sp.csr_matrix((np.ones(couplings.nnz), couplings.indices, couplings.indptr), shape=couplings.shape)
-        del couplings
-        aggregates = standard_aggregation(strength)[0]
+        smoothing, strength = _coarsening(matrix, theta, excluded)
+        tentative, candidates = fit_candidates(standard_aggregation(strength)[0], level.B)
         del strength
-        tentative, candidates = fit_candidates(aggregates, level.B)
-        del aggregates
-        row_sums = _absolute(smoothing) @ np.ones(matrix.shape[0])
-        weights = np.zeros_like(row_sums)
-        np.divide(PROLONGATION_OMEGA, row_sums, out=weights, where=row_sums != 0)
-        correction = smoothing @ tentative
-        del smoothing
-        if correction.format != "bsr":
-            correction = correction.tobsr(blocksize=tentative.blocksize)
-        scale_rows(correction, weights, copy=False)
-        level.P = _minus_plus_tentative(correction, tentative)
-        del tentative, correction
+        level.P = _smoothed_prolongator(smoothing, tentative)
+        del smoothing, tentative
         level.R = level.P.T
         coarse = level.R @ matrix @ level.P
-        if excluded is not None:  # kept out of every level, not only the finest
-            excluded = _galerkin_rows(level.P, excluded)
-            excluded.eliminate_zeros()
-            excluded = excluded if excluded.nnz else None
+        excluded = _excluded_below(level.P, excluded)
         level = MultilevelSolver.Level()
         level.A, level.B = coarse, candidates
         levels.append(level)
         matrix = coarse
     return MultilevelSolver(levels, coarse_solver="splu")
+
+
+def _coarsening(matrix, theta: float, excluded: sp.csr_matrix | None) -> tuple:
+    """(the matrix that smooths the level's prolongator, its strength graph): ``matrix`` less ``excluded``, and the
+    symmetric strength of connection between its block norms (every stored block at theta 0)."""
+    from pyamg.strength import symmetric_strength_of_connection
+
+    smoothing = matrix if excluded is None else _without(matrix, excluded)
+    couplings = _block_norms(smoothing) if smoothing.format == "bsr" else sp.csr_matrix(smoothing)
+    if excluded is not None:  # drop the couplings that only the excluded part made (from a copy: the block norms
+        couplings = couplings.copy()  # share their index arrays with the smoothing matrix)
+        couplings.eliminate_zeros()
+    strength = symmetric_strength_of_connection(couplings, theta) if theta else \
+        sp.csr_matrix((np.ones(couplings.nnz), couplings.indices, couplings.indptr), shape=couplings.shape)
+    return smoothing, strength
+
+
+def _smoothed_prolongator(smoothing, tentative: sp.bsr_matrix) -> sp.bsr_matrix:
+    """P = T - omega D^-1 (A T), D the row sums of |A| (pyamg's ``"local"`` weighting), A = ``smoothing``."""
+    from pyamg.util.utils import scale_rows
+
+    row_sums = _absolute(smoothing) @ np.ones(smoothing.shape[0])
+    weights = np.zeros_like(row_sums)
+    np.divide(PROLONGATION_OMEGA, row_sums, out=weights, where=row_sums != 0)
+    correction = smoothing @ tentative
+    if correction.format != "bsr":
+        correction = correction.tobsr(blocksize=tentative.blocksize)
+    scale_rows(correction, weights, copy=False)
+    return _minus_plus_tentative(correction, tentative)
+
+
+def _excluded_below(prolongation, excluded: sp.csr_matrix | None) -> sp.csr_matrix | None:
+    """The next level's excluded couplings, P^T C P (None when there are none)."""
+    if excluded is None:
+        return None
+    excluded = _galerkin_rows(prolongation, excluded)
+    excluded.eliminate_zeros()
+    return excluded if excluded.nnz else None
 
 
 def _minus_plus_tentative(correction: sp.bsr_matrix, tentative: sp.bsr_matrix) -> sp.bsr_matrix:
