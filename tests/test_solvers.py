@@ -185,6 +185,9 @@ def test_aggregation_by_the_matrix_itself_builds_the_same_hierarchy(system, rhs,
     assert pickle.loads(pickle.dumps(given)).precondition(rhs).tobytes() == plain.precondition(rhs).tobytes()
     with pytest.raises(ValueError, match="aggregation must have the matrix's shape"):
         AMGConjugateGradient().build(matrix, modes, aggregation=matrix.tocsr()[:30, :30])
+    far = sp.csr_matrix(([1.5], ([0], [matrix.shape[0] - 1])), shape=matrix.shape)  # the bar's two ends
+    with pytest.raises(ValueError, match=rf"does not store, entry \(0, {matrix.shape[0] - 1}\) = 1.5"):
+        AMGConjugateGradient().build(matrix, modes, aggregation=matrix + far)
 
 
 @pytest.mark.parametrize("theta", [0.0, 0.05])

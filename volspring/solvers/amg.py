@@ -393,8 +393,15 @@ class AMGConjugateGradient(_LinearSolver):
                 given = " with a prolongation" if prolongation is not None else ""
                 raise ValueError(f"aggregation must have the matrix's shape {matrix.shape} and no prolongation; got "
                                  f"shape {aggregation.shape}{given}")
-            excluded = sp.csr_matrix(matrix) - sp.csr_matrix(aggregation)  # exact zeros where they agree
+            excluded = sp.csr_matrix(frozen) - sp.csr_matrix(aggregation)  # exact zeros where they agree
             excluded.eliminate_zeros()
+            entries = excluded.tocoo()
+            outside = np.flatnonzero(_stored_at(frozen, entries.row, entries.col)[0] < 0)
+            if len(outside):
+                row, column = int(entries.row[outside[0]]), int(entries.col[outside[0]])
+                raise ValueError(f"aggregation has a coupling the matrix does not store, entry ({row}, {column}) "
+                                 f"= {sp.csr_matrix(aggregation)[row, column]:.6g}; expected couplings within the "
+                                 f"matrix's pattern ({len(outside)} such entries)")
             excluded = excluded if excluded.nnz else None
         self._source = _Source(frozen, near_null_space,
                                None if prolongation is None else sp.csr_matrix(prolongation), excluded=excluded)
@@ -727,24 +734,31 @@ def _without(matrix, excluded: sp.csr_matrix):
     Below the finest level both are Galerkin products, and a coupling that only ``excluded`` made (across a contact
     interface) leaves rounding where the difference is 0: entries below :data:`_SEPARATION_ROUNDING` of the
     excluded one are set to 0 (rounding is about 1e-16 of it, and a coupling that small would not move P)."""
-    if not matrix.has_canonical_format:
-        matrix.sum_duplicates()  # sorted in place, as the block norms would sort it (a Galerkin product's are not)
     excluded = excluded.tocoo()
-    size = matrix.blocksize[0] if matrix.format == "bsr" else 1
-    blocks = len(matrix.indptr) - 1
-    keys = np.repeat(np.arange(blocks, dtype=np.int64), np.diff(matrix.indptr)) * blocks + matrix.indices
-    wanted = (excluded.row // size).astype(np.int64) * blocks + excluded.col // size
-    position = np.searchsorted(keys, wanted)  # the canonical matrix's blocks are sorted by (row, column)
-    if not (position < len(keys)).all() or not (keys[np.minimum(position, len(keys) - 1)] == wanted).all():
-        raise ValueError("the excluded couplings must lie within the matrix's pattern")
+    position, entry = _stored_at(matrix, excluded.row, excluded.col)
+    inside = position >= 0  # outside: where a CSR Galerkin product dropped an exact 0 of A (C is rounding there)
+    position, entry, values = position[inside], entry[inside], excluded.data[inside]
     data = matrix.data.copy()
-    flat = data.reshape(len(keys), -1)
-    entry = (excluded.row % size) * size + excluded.col % size
-    np.subtract.at(flat, (position, entry), excluded.data)
-    residue = np.abs(flat[position, entry]) <= _SEPARATION_ROUNDING * np.abs(excluded.data)
+    flat = data.reshape(len(data), -1)
+    np.subtract.at(flat, (position, entry), values)
+    residue = np.abs(flat[position, entry]) <= _SEPARATION_ROUNDING * np.abs(values)
     flat[position[residue], entry[residue]] = 0.0
     kind = sp.bsr_matrix if matrix.format == "bsr" else sp.csr_matrix
     return kind((data, matrix.indices, matrix.indptr), shape=matrix.shape)
+
+
+def _stored_at(matrix, rows: np.ndarray, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where the entries (rows, columns) are stored in a CSR or BSR ``matrix`` (sorted in place if it is not): the
+    index of each one's block (or entry) in ``matrix.data``, -1 where it stores none, and its place in the block."""
+    if not matrix.has_canonical_format:
+        matrix.sum_duplicates()  # as the block norms would sort it (a Galerkin product's columns come unsorted)
+    size = matrix.blocksize[0] if matrix.format == "bsr" else 1
+    blocks = len(matrix.indptr) - 1
+    keys = np.repeat(np.arange(blocks, dtype=np.int64), np.diff(matrix.indptr)) * blocks + matrix.indices
+    wanted = (rows // size).astype(np.int64) * blocks + columns // size
+    position = np.minimum(np.searchsorted(keys, wanted), max(len(keys) - 1, 0))  # blocks sorted by (row, column)
+    found = keys[position] == wanted if len(keys) else np.zeros(len(wanted), dtype=bool)
+    return np.where(found, position, -1), (rows % size) * size + columns % size
 
 
 def _galerkin_rows(prolongation, change: sp.csr_matrix) -> sp.csr_matrix:
