@@ -424,3 +424,17 @@ def test_rcm_numbering_gives_the_same_step_as_natural_numbering(deformed_scene):
     integrator.cache.pattern = natural
     new_natural = integrator.step(scene, state, 0.01)
     assert np.abs(new_rcm.v - new_natural.v).max() <= 1e-10 * np.abs(new_natural.v).max()
+
+
+def test_the_block_pattern_keeps_no_construction_array_alive():
+    """Every array the pattern keeps owns its memory or views one of its own size: ``diagonal_blocks`` was a view
+    into the block index of every contribution (4 per spring, int64), which kept that alive with the pattern (0.21
+    KiB per node at 45k nodes, with the model for the whole run)."""
+    scene = beam((8, 2, 2))
+    pattern = BlockPattern(scene.model, scene.free)
+    for name, value in vars(pattern).items():
+        if isinstance(value, np.ndarray):
+            root = value
+            while isinstance(root.base, np.ndarray):
+                root = root.base
+            assert root.nbytes <= value.nbytes, (name, root.shape, value.shape)

@@ -210,7 +210,7 @@ class BlockPattern:
         self.block_count = len(unique_keys)
         self.indices = block_cols.astype(np.int32)
         self.indptr = np.searchsorted(block_rows, np.arange(f + 1)).astype(np.int32)
-        self.diagonal_blocks = block_of[:f]
+        self.diagonal_blocks = block_of[:f].copy()  # a view would keep every contribution's block index alive
         start = f
         for part, (rows, _, owner, sign, stored) in zip(self.parts, entries):
             where = block_of[start:start + len(rows)]
