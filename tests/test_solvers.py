@@ -147,10 +147,6 @@ def _contact_like_change(size, rng):
     return change.tocsr()
 
 
-def _whole(matrix):
-    return matrix.whole() if isinstance(matrix, _Triangles) else matrix
-
-
 def test_the_finest_prolongator_is_smoothed_without_the_excluded_couplings(system):
     """build(matrix, aggregation=A0), matrix = A0 + C: the finest level's aggregates and the smoothing of its
     prolongator come from A0 (to rounding: A0 is recovered as matrix - (matrix - A0)), the Galerkin product from
@@ -164,7 +160,8 @@ def test_the_finest_prolongator_is_smoothed_without_the_excluded_couplings(syste
     P, expected = given.hierarchy.levels[0].P.toarray(), plain.hierarchy.levels[0].P.toarray()
     # Rounding of (A0 + C) - C against A0, entries of order one in P (measured 0 to 1e-16).
     assert P.shape == expected.shape and np.abs(P - expected).max() <= 1e-12
-    coarse = _whole(given.hierarchy.levels[1].A).toarray()
+    coarse = given.hierarchy.levels[1].A
+    coarse = (coarse.whole() if isinstance(coarse, _Triangles) else coarse).toarray()
     galerkin = P.T @ with_change.toarray() @ P
     assert np.abs(coarse - galerkin).max() <= 1e-12 * np.abs(galerkin).max()  # the same sums, another order
     # The excluded couplings travel with a pickle: the rebuilt hierarchy preconditions bit for bit as the built one.
