@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from numpy.typing import ArrayLike
     from scipy import sparse
 
-__all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "PROLONGATION_OMEGA", "SMOOTHERS"]
+__all__ = ["AMGConjugateGradient", "BLOCK_JACOBI_OMEGA", "FINEST_DTYPE", "PROLONGATION_OMEGA", "SMOOTHERS"]
 
 logger = logging.getLogger(__name__)
 
@@ -31,6 +31,12 @@ PROLONGATION_OMEGA = 2.0
 _SEPARATION_ROUNDING = 1e-10
 #: Weight of the block Jacobi smoother, divided by a Gershgorin bound of D^-1 A on each level.
 BLOCK_JACOBI_OMEGA = 2.0 / 3.0
+#: The type the finest level's point-wise triangles are held and swept in (see :class:`AMGConjugateGradient`).
+FINEST_DTYPE = np.float32
+#: Single precision holds a finest level whose stored magnitudes are at most this and whose diagonal's are at least
+#: its inverse: with the cycle's residual scaled to a largest entry of 1, the sweeps stay inside single precision's
+#: normal range (2^-126 to 2^128). A level outside (no system in SI units comes near) is held in double.
+SINGLE_PRECISION_RANGE = 2.0**60
 
 
 def _v_cycle(hierarchy):
@@ -64,7 +70,19 @@ def _v_cycle(hierarchy):
         level.postsmoother(matrix, z, r)
         return z
 
-    return apply
+    def cycle(r):
+        if levels[0].A.dtype == r.dtype:
+            return apply(r)
+        # A finest level held in single precision sweeps in it, on r scaled by a power of two to a largest entry in
+        # [1, 2): exact, and no entry of a residual CG has shrunk by 1e-10 under- or overflows there. The cycle is
+        # linear, so z scales back exactly.
+        largest = max(float(r.max()), -float(r.min()))
+        if largest == 0.0:
+            return np.zeros_like(r)
+        exponent = int(np.frexp(largest)[1]) - 1 if np.isfinite(largest) else 0
+        return np.ldexp(apply(np.ldexp(r, -exponent)).astype(r.dtype), exponent)
+
+    return cycle
 
 
 class _Triangles:
@@ -86,21 +104,25 @@ class _Triangles:
         (the blocks' layout stays whole, so :meth:`whole` gives the BSR matrix back entry for entry).
     point_wise : bool
         Sweep a BSR matrix entry by entry.
+    dtype : numpy dtype, optional
+        Of the stored triangles (default the matrix's). The sweeps take vectors of any float type and run in this
+        one; ``whole`` gives the matrix back rounded to it.
 
     It stands in for the matrix on a pyamg level: ``shape``, ``nnz``, ``format``, ``dtype``, ``@``, and the level's
     smoothers :meth:`forward` and :meth:`backward` for any x (pyamg's own cycle and ``solve`` run on it too).
     """
 
-    def __init__(self, matrix, *, point_wise: bool = False):
+    def __init__(self, matrix, *, point_wise: bool = False, dtype=None):
         if not matrix.has_sorted_indices:
             raise ValueError("triangles are made from a matrix with sorted indices")
-        self.shape, self.dtype, self.nnz = matrix.shape, matrix.dtype, matrix.nnz
+        self.shape, self.nnz = matrix.shape, matrix.nnz
+        self.dtype = np.dtype(matrix.dtype if dtype is None else dtype)
         blocked = matrix.format == "bsr"
         size = matrix.blocksize[0] if blocked else 1
         rows = np.repeat(np.arange(matrix.shape[0] // size, dtype=matrix.indices.dtype), np.diff(matrix.indptr))
         halves = []
         for keep, where in (("lower", matrix.indices <= rows), ("upper", matrix.indices >= rows)):
-            half = _rows_where(matrix, rows, where)
+            half = _rows_where(matrix, rows, where, self.dtype)
             # One half at a time, its block form dropped at once: they are made after a build, at its peak memory.
             halves.append(_scalar_triangle(half, keep) if blocked and point_wise else half)
             del half
@@ -111,7 +133,7 @@ class _Triangles:
         if blocked and not point_wise:
             from pyamg.util.utils import get_block_diag
 
-            self.inverse = get_block_diag(matrix, blocksize=size, inv_flag=True)
+            self.inverse = get_block_diag(matrix, blocksize=size, inv_flag=True).astype(self.dtype, copy=False)
         self.lower, self.upper = lower, upper
         self.format = lower.format
         self.diagonal = _block_diagonal(lower, size) if self.inverse is not None else lower.diagonal()
@@ -123,17 +145,23 @@ class _Triangles:
         return np.einsum("nij,nj->ni", self.diagonal, x.reshape(-1, size)).reshape(x.shape)
 
     def _sweep(self, triangle, x: np.ndarray, b: np.ndarray, direction: str) -> None:
+        """One sweep over ``triangle`` in place on ``x``, in the triangles' dtype (pyamg's kernels take one type)."""
         from pyamg.relaxation.relaxation import block_gauss_seidel, gauss_seidel
 
+        b = np.asarray(b, dtype=self.dtype)
+        swept = x if x.dtype == self.dtype else x.astype(self.dtype)
         if self.inverse is None:
-            gauss_seidel(triangle, x, b, iterations=1, sweep=direction)
+            gauss_seidel(triangle, swept, b, iterations=1, sweep=direction)
         else:
-            block_gauss_seidel(triangle, x, b, iterations=1, sweep=direction, blocksize=len(self.inverse[0]),
+            block_gauss_seidel(triangle, swept, b, iterations=1, sweep=direction, blocksize=len(self.inverse[0]),
                                Dinv=self.inverse)
+        if swept is not x:
+            x[...] = swept
 
     def forward_from_zero(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """z = (D + L)^-1 r, a forward sweep from x = 0, and the residual r - A z = -U z."""
-        z = np.zeros_like(r)
+        """z = (D + L)^-1 r, a forward sweep from x = 0, and the residual r - A z = -U z (both in the triangles'
+        dtype)."""
+        z = np.zeros(r.shape, dtype=self.dtype)
         self._sweep(self.lower, z, r, "forward")
         return z, self._diagonal_times(z) - self.upper @ z
 
@@ -173,12 +201,26 @@ class _Triangles:
                     shape=self.shape)
 
 
-def _rows_where(matrix, rows: np.ndarray, where: np.ndarray):
-    """The entries (or blocks) of a CSR (or BSR) ``matrix``, in rows ``rows``, where ``where`` holds; same format."""
+def _finest_dtype(matrix) -> np.dtype:
+    """:data:`FINEST_DTYPE` when ``matrix`` is within :data:`SINGLE_PRECISION_RANGE`, else its own dtype."""
+    data = matrix.data
+    largest = max(float(data.max()), -float(data.min())) if data.size else 0.0
+    diagonal = np.abs(matrix.diagonal())
+    inside = largest <= SINGLE_PRECISION_RANGE and (not diagonal.size or diagonal.min() >= 1 / SINGLE_PRECISION_RANGE)
+    if not inside:
+        logger.debug("finest AMG level held in double precision: largest entry %.3g, smallest diagonal %.3g",
+                     largest, diagonal.min() if diagonal.size else 0.0)
+    return np.dtype(FINEST_DTYPE if inside else matrix.dtype)
+
+
+def _rows_where(matrix, rows: np.ndarray, where: np.ndarray, dtype=None):
+    """The entries (or blocks) of a CSR (or BSR) ``matrix``, in rows ``rows``, where ``where`` holds, as ``dtype``
+    (default the matrix's); same format."""
     counts = np.bincount(rows[where], minlength=len(matrix.indptr) - 1)
     indptr = np.concatenate([[0], np.cumsum(counts)]).astype(matrix.indptr.dtype)
     kind = sp.bsr_matrix if matrix.format == "bsr" else sp.csr_matrix
-    return kind((matrix.data[where], matrix.indices[where], indptr), shape=matrix.shape)
+    data = matrix.data[where].astype(matrix.dtype if dtype is None else dtype, copy=False)
+    return kind((data, matrix.indices[where], indptr), shape=matrix.shape)
 
 
 def _scalar_triangle(blocks: sp.bsr_matrix, keep: str) -> sp.csr_matrix:
@@ -213,7 +255,7 @@ class _Source:
     """What a hierarchy is built from: enough to rebuild it bit for bit (after unpickling)."""
 
     # Frozen copy of the fine matrix. With the default smoother it is the triangles of the hierarchy's finest level
-    # (one copy, the same object; a rebuild gives pyamg their whole matrix), except for a two-level cycle.
+    # (one copy, the same object, in single precision within its range), except for a two-level cycle.
     matrix: sp.spmatrix | _Triangles
     near_null_space: np.ndarray   # (N, k) or, with a prolongation, (n, k)
     prolongation: sp.spmatrix | None = None  # (N, n): coarse space of a two-level cycle
@@ -246,7 +288,14 @@ class AMGConjugateGradient(_LinearSolver):
         large mass ratios bring, so it is not offered. With the default every level but the coarsest is
         held as its two triangles (:class:`_Triangles`), which makes each sweep from a zero guess and the
         residual after it half a mat-vec each; the finest level's triangles are also the kept copy of the
-        built matrix (CSR, 3.5 bytes per nonzero more than a BSR copy; pyamg builds from the BSR matrix).
+        built matrix. They are held and swept in single precision (:data:`FINEST_DTYPE`; CG, its products
+        and the coarser levels stay in double): 4 bytes less per stored entry, and the point-wise sweep reads
+        fewer. On the README beam at 45k nodes the triangles hold 1.08 KiB per node instead of 1.61, a V-cycle
+        costs 9.1-9.5 mat-vecs instead of 10.0-10.2 and a step 79-82 instead of 87, for the same CG iterations
+        (``python benchmarks/study_amg_levers.py --nodes 45000 --variants base finest_double``); the cycle is
+        then symmetric to single-precision rounding (about 1e-7 relative), which left CG's iterations unchanged
+        down to rtol 1e-9 there. The coarser levels' block products and sweeps are slower in single precision
+        (scipy's and pyamg's kernels: 10-25% per product) and stay double.
     max_coarse : int
         Unknowns on the coarsest level (solved with sparse LU).
     strength_theta : float
@@ -281,10 +330,13 @@ class AMGConjugateGradient(_LinearSolver):
     stalled.
 
     Pickling: a pyamg hierarchy does not pickle (its smoothers and coarse solver are closures), so
-    a pickled solver keeps the frozen matrix and near-null space it was built from and leaves
-    :attr:`hierarchy` at None; the next :meth:`solve` or :meth:`precondition` rebuilds it (counted
-    in ``setup_seconds`` and ``build_count``). The build is deterministic, so the rebuilt
-    hierarchy, and every answer, is the same bit for bit.
+    a pickled solver leaves :attr:`hierarchy` at None and the next :meth:`solve` or
+    :meth:`precondition` makes it again (counted in ``setup_seconds``). With the default smoother its
+    levels travel in the pickle (the finest as the built triangles), since the double-precision matrix
+    they were built from is not kept: only the coarse LU is factorised again. With the others the
+    pickle keeps the frozen matrix and near-null space, and the hierarchy is rebuilt from them (counted
+    in ``build_count`` too). Both are deterministic, so the hierarchy, and every answer, is the same
+    bit for bit.
 
     Reproducibility: the build draws no random numbers, so the same matrix gives the same
     hierarchy bit for bit and the caller's global random state is never touched. pyamg's default
@@ -329,6 +381,7 @@ class AMGConjugateGradient(_LinearSolver):
         self._hierarchy: Any = None  # pyamg MultilevelSolver (not pickled)
         self._cycle: Callable[[np.ndarray], np.ndarray] | None = None  # r -> z, one V-cycle of it (not pickled)
         self._refreshed = False  # the finest level holds a refresh()'s matrix, not the built one
+        self._levels: list | None = None  # an unpickled hierarchy's levels, until the next use puts them together
 
     @property
     def hierarchy(self) -> Any:
@@ -338,8 +391,41 @@ class AMGConjugateGradient(_LinearSolver):
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        state["_hierarchy"] = state["_cycle"] = None  # closures inside: rebuilt from _source on use
+        state["_hierarchy"] = state["_cycle"] = None  # closures inside: put together again on use
+        hierarchy, source = self._hierarchy, self._source
+        if hierarchy is not None and source is not None and isinstance(source.matrix, _Triangles) \
+                and source.prolongation is None:
+            # The finest level's triangles are the kept copy, rounded to FINEST_DTYPE: the matrix the levels were
+            # built from is gone, so the levels travel (the finest as the built triangles, not a refresh's).
+            state["_levels"] = [(None if index == 0 else level.A, getattr(level, "P", None),
+                                 getattr(level, "R", None), level.B) for index, level in enumerate(hierarchy.levels)]
         return state
+
+    def __setstate__(self, state):
+        self.__dict__.update(state)
+        self.__dict__.setdefault("_levels", None)  # pickled before the levels travelled
+
+    def _unpickled(self) -> bool:
+        """Make the hierarchy and its cycle again after unpickling: from the pickled levels, or rebuilt from the kept
+        matrix (deterministic: the same bits either way). Returns whether it was rebuilt."""
+        if self._levels is None:
+            self._construct()
+            return True
+        from pyamg.multilevel import MultilevelSolver
+
+        source, levels = self._source, []
+        assert source is not None  # levels travel with their source
+        for index, (matrix, prolongation, restriction, candidates) in enumerate(self._levels):
+            level = MultilevelSolver.Level()
+            level.A, level.B = source.matrix if index == 0 else matrix, candidates
+            if prolongation is not None:
+                level.P, level.R = prolongation, restriction
+            levels.append(level)
+        hierarchy = MultilevelSolver(levels, coarse_solver="splu")
+        self._set_triangles(hierarchy, source.matrix)
+        self._adopt(hierarchy)
+        self._levels = None
+        return False
 
     def build(self, matrix: sparse.spmatrix, near_null_space: ArrayLike, *,
               prolongation: sparse.spmatrix | None = None, aggregation: sparse.spmatrix | None = None) -> float:
@@ -403,6 +489,7 @@ class AMGConjugateGradient(_LinearSolver):
                                  f"= {sp.csr_matrix(aggregation)[row, column]:.6g}; expected couplings within the "
                                  f"matrix's pattern ({len(outside)} such entries)")
             excluded = excluded if excluded.nnz else None
+        self._levels = None
         self._source = _Source(frozen, near_null_space,
                                None if prolongation is None else sp.csr_matrix(prolongation), excluded=excluded)
         cached = set(vars(matrix))
@@ -428,8 +515,8 @@ class AMGConjugateGradient(_LinearSolver):
         matrix = source.matrix
         if source.prolongation is not None:
             matrix = (source.prolongation.T @ matrix @ source.prolongation).tocsr()
-        elif isinstance(matrix, _Triangles):  # a rebuild
-            matrix = matrix.whole()
+        elif isinstance(matrix, _Triangles):  # a rebuild of a solver pickled before its levels travelled
+            matrix = matrix.whole().astype(np.float64, copy=False)
         hierarchy = _smoothed_aggregation(matrix, source.near_null_space, theta=self.strength_theta,
                                           excluded=source.excluded, max_coarse=self.max_coarse)
         if self.strength_theta and hierarchy.operator_complexity() > 2.5:
@@ -444,12 +531,19 @@ class AMGConjugateGradient(_LinearSolver):
             else:
                 # Point-wise sweeps on every matrix of 3x3 blocks: pyamg's block sweep there costs 3.5 times as much.
                 finest.sort_indices()  # a two-level cycle's coarse space comes out of a product unsorted
-                finest = _Triangles(finest, point_wise=True)
+                # Single precision where the triangles become the kept copy (a two-level cycle's are made from it).
+                finest = _Triangles(finest, point_wise=True,
+                                    dtype=_finest_dtype(finest) if source.prolongation is None else None)
                 if source.prolongation is None:  # a new build: from now on the triangles are the kept copy
                     source = self._source = replace(source, matrix=finest)
             self._set_triangles(hierarchy, finest)
         else:
             self._set_smoothers(hierarchy)
+        self._adopt(hierarchy)
+        self.build_count += 1
+
+    def _adopt(self, hierarchy) -> None:
+        """Factorise the coarsest level and make the cycle of ``hierarchy``, now the solver's."""
         self._refreshed = False
         coarsest = hierarchy.levels[-1].A
         try:
@@ -460,7 +554,6 @@ class AMGConjugateGradient(_LinearSolver):
             hierarchy.coarse_solver = coarse_grid_solver("pinv")
             hierarchy.coarse_solver(coarsest, np.zeros(coarsest.shape[0]))
         self._hierarchy, self._cycle = hierarchy, _v_cycle(hierarchy)
-        self.build_count += 1
 
     def _set_smoothers(self, hierarchy) -> None:
         """(Re)make the smoothers from the levels' current matrices: the finest level's point-wise sweeps, every
@@ -520,7 +613,7 @@ class AMGConjugateGradient(_LinearSolver):
             if not given.has_canonical_format:
                 given = given.copy()
                 given.sum_duplicates()
-            hierarchy.levels[0].A = _Triangles(given, point_wise=True)
+            hierarchy.levels[0].A = _Triangles(given, point_wise=True, dtype=_finest_dtype(given))
         else:
             hierarchy.levels[0].A = sp.bsr_matrix(matrix, blocksize=(3, 3))
             self._set_smoothers(hierarchy)
@@ -556,7 +649,7 @@ class AMGConjugateGradient(_LinearSolver):
         if self._cycle is None:
             if self._source is None:
                 raise ValueError("the AMG hierarchy is not built: call build(matrix, near_null_space) first")
-            self._construct()  # after unpickling: the same hierarchy again
+            self._unpickled()  # the same hierarchy again
         source, cycle = self._source, self._cycle
         assert source is not None and cycle is not None  # both set by _construct()
         if source.prolongation is None:
@@ -596,10 +689,10 @@ class AMGConjugateGradient(_LinearSolver):
             if near_null_space is None:
                 raise ValueError("the first AMG solve needs near_null_space (rigid-body modes)")
             setup = self.build(matrix, near_null_space, prolongation=prolongation)
-        elif self._cycle is None:  # unpickled: rebuild from the kept matrix, the same bits
+        elif self._cycle is None:  # unpickled: the same hierarchy again, the same bits
             start = self.timer()
-            self._construct()
-            setup, rebuilt = self.timer() - start, True
+            rebuilt = self._unpickled()
+            setup = self.timer() - start
         start = self.timer()
         x, iterations, residual, initial = conjugate_gradient(
             _operator(matrix, extra), rhs, x0=x0, preconditioner=self.precondition, rtol=self.rtol,
