@@ -71,7 +71,8 @@ def measure(k: int, steps: int, smoother: str) -> None:
     residual = generator.standard_normal(matrix.shape[0])
     print(f"  one V-cycle {per_call(lambda: cycle(residual)) / mv:.1f} mv; levels (unknowns, nonzeros, block):")
     for index, level in enumerate(hierarchy.levels[:-1]):
-        vector, guess = generator.standard_normal(level.A.shape[0]), np.zeros(level.A.shape[0])
+        # The guess in the level's own type, as the cycle's z (the finest level sweeps in single precision).
+        vector, guess = generator.standard_normal(level.A.shape[0]), np.zeros(level.A.shape[0], dtype=level.A.dtype)
         coarse = np.ones(level.P.shape[1])
         head = f"    {index}: {level.A.shape[0]:>7} {level.A.nnz:>9} {str(getattr(level.A, 'blocksize', None) or (1, 1)):>7}:"
         if isinstance(level.A, _Triangles):  # what the cycle runs: a sweep from zero and -U z, then a full sweep

@@ -18,13 +18,17 @@ package's own steps with the levers in it) or the solver's option defaults. Per 
   first) and the mean CG iterations, over steps 3 to ``--steps`` at dt = 0.01 s; ``builds``: the hierarchies that run
   built (1 unless the iterations grew enough for a rebuild);
 - ``P+R``: the memory the levels' prolongators and restrictions hold, KiB per node (shared arrays once);
+- ``finest``: the memory the finest level's matrix holds (its triangles with the default smoother), KiB per node;
 
 times as multiples of one mat-vec (``mv``) with the first step's matrix, measured again before each variant (its
 time in ``mv [ms]``). The variants:
 
 =====================  ===========================================================================================
 ``base``               as the package builds it (six rigid-body modes, symmetric strength 0.05, standard
-                       aggregation, P = T - omega D^-1 A T on every level, R = P^T, coarse (R A) P, BSR)
+                       aggregation, P = T - omega D^-1 A T on every level, R = P^T, coarse (R A) P, BSR; the
+                       finest level's triangles in single precision)
+``finest_double``      the finest level's triangles held and swept in double precision (the default until
+                       stop 26; ``amg.FINEST_DTYPE``)
 ``coarse_unsmoothed``  P smoothed on the finest level only; the tentative T is P on the coarser levels
 ``filtered``           P smoothed with A filtered to the strength pattern, as pyamg's ``filter_entries``: only the
                        strong block couplings (and the diagonal) of A in A T and in the row sums D, then the
@@ -177,9 +181,11 @@ def translations_only(matrix, near_null_space, **options):
     return PACKAGE_LEVELS(matrix, np.ascontiguousarray(near_null_space[:, :3]), **options)
 
 
-#: name -> (the level builder put in place of the package's, or None; AMGConjugateGradient option defaults changed)
+#: name -> (the level builder put in place of the package's, or None; AMGConjugateGradient option defaults changed;
+#: and module constants of volspring.solvers.amg changed)
 VARIANTS = {
     "base": (None, {}),
+    "finest_double": (None, {}, {"FINEST_DTYPE": np.float64}),
     "coarse_unsmoothed": (functools.partial(levels, smooth_coarse=False), {}),
     "filtered": (functools.partial(levels, filtered=True), {}),
     "naive": (functools.partial(levels, aggregate=naive_aggregation), {}),
@@ -198,7 +204,7 @@ def lever(variant):
     package's back on the way out, whatever happens. Option defaults reach every solver made meanwhile, the
     integrator's too. Yields a list that gets the operator complexity of every set of levels built inside (two per
     build when the package rejects a hierarchy above complexity 2.5 and builds again at theta 0)."""
-    builder, options = VARIANTS[variant]
+    builder, options, constants = (VARIANTS[variant] + ({},))[:3]
     builder = PACKAGE_LEVELS if builder is None else builder
     complexities = []
 
@@ -208,15 +214,19 @@ def lever(variant):
         return hierarchy
 
     defaults = amg.AMGConjugateGradient.__init__.__kwdefaults__
-    saved = dict(defaults)
+    saved, saved_constants = dict(defaults), {name: getattr(amg, name) for name in constants}
     try:
         defaults.update(options)
+        for name, value in constants.items():
+            setattr(amg, name, value)
         amg._smoothed_aggregation = recorded
         yield complexities
     finally:
         amg._smoothed_aggregation = PACKAGE_LEVELS
         defaults.clear()
         defaults.update(saved)
+        for name, value in saved_constants.items():
+            setattr(amg, name, value)
 
 
 def check_copy(matrix, modes):
@@ -246,6 +256,13 @@ def transfer_bytes(hierarchy) -> int:
                     root = root.base
                 arrays[id(root)] = root.nbytes
     return sum(arrays.values())
+
+
+def finest_bytes(hierarchy) -> int:
+    """Bytes held by the finest level's matrix (its two triangles with the default smoother)."""
+    finest = hierarchy.levels[0].A
+    parts = (finest.lower, finest.upper) if isinstance(finest, amg._Triangles) else (finest,)
+    return sum(part.data.nbytes + part.indices.nbytes + part.indptr.nbytes for part in parts)
 
 
 def beam(cells):
@@ -278,6 +295,7 @@ def measure(variant, scene, matrix, modes, steps):
         hierarchy = solver.hierarchy
         sizes = "/".join(str(level.A.shape[0]) for level in hierarchy.levels)
         transfer = transfer_bytes(hierarchy) / 1024 / scene.model.node_count
+        finest = finest_bytes(hierarchy) / 1024 / scene.model.node_count
         integrator = ImplicitEuler(timer=time.process_time, on_failure="warn")
         state, seconds, iterations = scene.initial_state(), [], []
         for _ in range(steps):
@@ -287,7 +305,7 @@ def measure(variant, scene, matrix, modes, steps):
             iterations.append(integrator.last_solve.iterations)
     print(f"{variant:<18} {min(builds) / mv:6.0f} {rejected:>8} {info.iterations:4d} {np.median(cycles) / mv:7.2f} "
           f"{hierarchy.operator_complexity():5.2f} {np.median(seconds[2:]) / mv:6.1f} {np.mean(iterations[2:]):7.1f} "
-          f"{integrator.solver.build_count:6d} {transfer:7.2f} {1e3 * mv:7.2f}  {sizes}", flush=True)
+          f"{integrator.solver.build_count:6d} {transfer:7.2f} {finest:7.2f} {1e3 * mv:7.2f}  {sizes}", flush=True)
 
 
 def main():
@@ -310,7 +328,7 @@ def main():
     print(f"README beam, cells {5 * cells} x {cells} x {cells}: {scene.model.node_count} nodes, {matrix.shape[0]} "
           f"unknowns; dt = {DT} s, steps 3 to {args.steps}; times in mat-vecs (mv) with the first step's matrix")
     print(f"{'variant':<18} {'build':>6} {'rejected':>8} {'CG':>4} {'V-cycle':>7} {'op.cx':>5} {'step':>6} "
-          f"{'step CG':>7} {'builds':>6} {'P+R':>7} {'mv [ms]':>7}  levels (unknowns)")
+          f"{'step CG':>7} {'builds':>6} {'P+R':>7} {'finest':>7} {'mv [ms]':>7}  levels (unknowns)")
     for variant in args.variants:
         measure(variant, scene, matrix, modes, args.steps)
 
