@@ -26,9 +26,9 @@ time in ``mv [ms]``). The variants:
 =====================  ===========================================================================================
 ``base``               as the package builds it (six rigid-body modes, symmetric strength 0.05, standard
                        aggregation, P = T - omega D^-1 A T on every level, R = P^T, coarse (R A) P, BSR; the
-                       finest level's triangles in single precision)
-``finest_double``      the finest level's triangles held and swept in double precision (the default until
-                       stop 26; ``amg.FINEST_DTYPE``)
+                       finest level's triangles, P and R then held in single precision, P as CSR, R its view)
+``finest_double``      the finest level's triangles, P and R held in double precision (BSR P and R), as
+                       until stop 26 (``amg.FINEST_DTYPE``)
 ``coarse_unsmoothed``  P smoothed on the finest level only; the tentative T is P on the coarser levels
 ``filtered``           P smoothed with A filtered to the strength pattern, as pyamg's ``filter_entries``: only the
                        strong block couplings (and the diagonal) of A in A T and in the row sums D, then the

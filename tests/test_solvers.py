@@ -100,7 +100,7 @@ def test_every_smoother_makes_a_symmetric_positive_definite_v_cycle(system, smoo
     assert np.dot(u, solver.precondition(u)) > 0 and np.dot(v, solver.precondition(v)) > 0
 
 
-def test_default_smoother_sweeps_the_finest_level_point_wise_on_the_current_matrix(system, rhs):
+def test_default_smoother_sweeps_the_finest_level_point_wise_on_the_current_matrix(system, rhs, monkeypatch):
     """The default keeps the finest level as CSR (pyamg sweeps a BSR matrix by blocks, at 3.5 times the
     cost of a point-wise sweep) holding the built matrix in single precision, and after refresh() the refreshed
     one."""
@@ -110,6 +110,16 @@ def test_default_smoother_sweeps_the_finest_level_point_wise_on_the_current_matr
     finest = solver.hierarchy.levels[0].A
     assert isinstance(finest, _Triangles) and finest.format == "csr" and finest.lower.data.dtype == np.float32
     assert (finest.whole() != matrix.astype(np.float32)).nnz == 0
+    # Its P in single precision as CSR, R the transpose as a view of P's arrays (no copy), both equal to the built
+    # double P rounded (that P, built again in double, is the reference).
+    level = solver.hierarchy.levels[0]
+    assert level.P.format == "csr" and level.P.dtype == np.float32 and amg._transposed(level)
+    assert (level.R != level.P.T).nnz == 0
+    with monkeypatch.context() as patch:
+        patch.setattr(amg, "FINEST_DTYPE", np.float64)
+        double = AMGConjugateGradient()
+        double.build(matrix, modes)
+    assert double.hierarchy.levels[0].P.format == "bsr" and (level.P != double.hierarchy.levels[0].P.astype(np.float32)).nnz == 0
     assert all(level.A.format == "bsr" for level in solver.hierarchy.levels[1:])
     stiffer = (matrix + sp.identity(matrix.shape[0], format="bsr")).tobsr(blocksize=(3, 3))
     before = solver.precondition(rhs)
@@ -152,10 +162,11 @@ def _contact_like_change(size, rng):
     return change.tocsr()
 
 
-def test_the_finest_prolongator_is_smoothed_without_the_excluded_couplings(system):
+def test_the_finest_prolongator_is_smoothed_without_the_excluded_couplings(system, monkeypatch):
     """build(matrix, aggregation=A0), matrix = A0 + C: the finest level's aggregates and the smoothing of its
     prolongator come from A0 (to rounding: A0 is recovered as matrix - (matrix - A0)), the Galerkin product from
-    the matrix with C."""
+    the matrix with C. (The finest level in double, so that P is the one built, not its single-precision copy.)"""
+    monkeypatch.setattr(amg, "FINEST_DTYPE", np.float64)
     matrix, modes, _ = system
     change = _contact_like_change(matrix.shape[0], np.random.default_rng(6))
     with_change = sp.bsr_matrix(matrix + change, blocksize=(3, 3))
@@ -459,6 +470,8 @@ def test_solver_round_trips_through_pickle_and_solves_to_the_same_answer(system,
         rebuilt = smoother != ""
         assert info_after.rebuilt == rebuilt and copy.build_count == solver.build_count + rebuilt
         assert len(copy.hierarchy.levels) == len(solver.hierarchy.levels)
+        # A restriction held as a view of its prolongator is one again (not a second copy from the pickle).
+        assert amg._transposed(copy.hierarchy.levels[0]) == amg._transposed(solver.hierarchy.levels[0]) != rebuilt
         # A second pickle of the unpickled solver, and one of a solver never built, work too.
         assert pickle.loads(pickle.dumps(copy)).solve(matrix, rhs)[0].tobytes() == before.tobytes()
         assert pickle.loads(pickle.dumps(AMGConjugateGradient())).hierarchy is None

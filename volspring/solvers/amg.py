@@ -65,8 +65,9 @@ def _v_cycle(hierarchy):
             z = np.zeros_like(r)
             level.presmoother(matrix, z, r)
             residual = r - matrix @ z
-        coarse = level.R @ residual
-        z += level.P @ (hierarchy.coarse_solver(levels[-1].A, coarse) if index == last else apply(coarse, index + 1))
+        coarse = (level.R @ residual).astype(levels[index + 1].A.dtype, copy=False)
+        correction = hierarchy.coarse_solver(levels[-1].A, coarse) if index == last else apply(coarse, index + 1)
+        z += level.P @ correction.astype(level.P.dtype, copy=False)  # in P's precision: no upcast copy of P
         level.postsmoother(matrix, z, r)
         return z
 
@@ -201,6 +202,29 @@ class _Triangles:
                     shape=self.shape)
 
 
+def _transposed(level) -> bool:
+    """Whether ``level``'s R is a view of its P's arrays (:func:`_single_transfer`)."""
+    P, R = getattr(level, "P", None), getattr(level, "R", None)
+    return P is not None and R is not None and R.format == "csc" and np.shares_memory(R.data, P.data)
+
+
+def _single_transfer(level, dtype) -> None:
+    """Hold ``level``'s prolongator P as CSR in ``dtype`` (the finest level's single precision) and its restriction R
+    as P's transpose, a CSC view of the same arrays, in place of P and R as double BSR: 4 bytes less per entry, an
+    index per entry instead of per block, and no second copy for R (0.61 instead of 1.22 KiB per node at 45k nodes),
+    for a V-cycle as fast (the products of a single-precision CSR matrix cost about those of a double BSR one: the
+    cycle's correction is cast to single before it is prolonged, so that scipy does not upcast a copy of P each
+    time; ``python benchmarks/study_amg_levers.py --variants base finest_double``)."""
+    prolongation = level.P
+    level.R = None  # the BSR transpose goes first (peak memory)
+    blocks = sp.bsr_matrix((prolongation.data.astype(dtype), prolongation.indices, prolongation.indptr),
+                           shape=prolongation.shape)
+    del prolongation
+    level.P = blocks.tocsr()
+    del blocks
+    level.R = level.P.T
+
+
 def _finest_dtype(matrix) -> np.dtype:
     """:data:`FINEST_DTYPE` when ``matrix`` is within :data:`SINGLE_PRECISION_RANGE`, else its own dtype."""
     data = matrix.data
@@ -288,14 +312,15 @@ class AMGConjugateGradient(_LinearSolver):
         large mass ratios bring, so it is not offered. With the default every level but the coarsest is
         held as its two triangles (:class:`_Triangles`), which makes each sweep from a zero guess and the
         residual after it half a mat-vec each; the finest level's triangles are also the kept copy of the
-        built matrix. They are held and swept in single precision (:data:`FINEST_DTYPE`; CG, its products
-        and the coarser levels stay in double): 4 bytes less per stored entry, and the point-wise sweep reads
-        fewer. On the README beam at 45k nodes the triangles hold 1.08 KiB per node instead of 1.61, a V-cycle
-        costs 9.1-9.5 mat-vecs instead of 10.0-10.2 and a step 79-82 instead of 87, for the same CG iterations
-        (``python benchmarks/study_amg_levers.py --nodes 45000 --variants base finest_double``); the cycle is
-        then symmetric to single-precision rounding (about 1e-7 relative), which left CG's iterations unchanged
-        down to rtol 1e-9 there. The coarser levels' block products and sweeps are slower in single precision
-        (scipy's and pyamg's kernels: 10-25% per product) and stay double.
+        built matrix. They are held and swept in single precision (:data:`FINEST_DTYPE`), and so are the
+        finest level's prolongator P (as CSR) and restriction R (P's transpose, a view of the same arrays);
+        CG, its products and the coarser levels stay in double. On the README beam at 45k nodes the triangles
+        hold 1.08 KiB per node instead of 1.61 and P with R 0.61 instead of 1.22, and a V-cycle costs 9.5-9.9
+        mat-vecs instead of 10.3-10.6, for the same CG iterations (``python benchmarks/study_amg_levers.py
+        --nodes 45000 --variants base finest_double``); the cycle is then symmetric to single-precision
+        rounding (about 1e-7 relative), which left CG's iterations unchanged down to rtol 1e-9 there. The
+        coarser levels' block products and sweeps are slower in single precision (scipy's and pyamg's
+        kernels: 10-25% per product) and stay double.
     max_coarse : int
         Unknowns on the coarsest level (solved with sparse LU).
     strength_theta : float
@@ -397,8 +422,10 @@ class AMGConjugateGradient(_LinearSolver):
                 and source.prolongation is None:
             # The finest level's triangles are the kept copy, rounded to FINEST_DTYPE: the matrix the levels were
             # built from is gone, so the levels travel (the finest as the built triangles, not a refresh's).
+            # A restriction held as a view of its prolongator's arrays travels as None (made again as P^T).
             state["_levels"] = [(None if index == 0 else level.A, getattr(level, "P", None),
-                                 getattr(level, "R", None), level.B) for index, level in enumerate(hierarchy.levels)]
+                                 None if _transposed(level) else getattr(level, "R", None), level.B)
+                                for index, level in enumerate(hierarchy.levels)]
         return state
 
     def __setstate__(self, state):
@@ -419,7 +446,7 @@ class AMGConjugateGradient(_LinearSolver):
             level = MultilevelSolver.Level()
             level.A, level.B = source.matrix if index == 0 else matrix, candidates
             if prolongation is not None:
-                level.P, level.R = prolongation, restriction
+                level.P, level.R = prolongation, prolongation.T if restriction is None else restriction
             levels.append(level)
         hierarchy = MultilevelSolver(levels, coarse_solver="splu")
         self._set_triangles(hierarchy, source.matrix)
@@ -537,6 +564,8 @@ class AMGConjugateGradient(_LinearSolver):
                 if source.prolongation is None:  # a new build: from now on the triangles are the kept copy
                     source = self._source = replace(source, matrix=finest)
             self._set_triangles(hierarchy, finest)
+            if finest.dtype != hierarchy.levels[1].A.dtype:
+                _single_transfer(hierarchy.levels[0], finest.dtype)
         else:
             self._set_smoothers(hierarchy)
         self._adopt(hierarchy)
