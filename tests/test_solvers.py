@@ -119,7 +119,8 @@ def test_default_smoother_sweeps_the_finest_level_point_wise_on_the_current_matr
         patch.setattr(amg, "FINEST_DTYPE", np.float64)
         double = AMGConjugateGradient()
         double.build(matrix, modes)
-    assert double.hierarchy.levels[0].P.format == "bsr" and (level.P != double.hierarchy.levels[0].P.astype(np.float32)).nnz == 0
+    built = double.hierarchy.levels[0].P
+    assert built.format == "bsr" and (level.P != built.astype(np.float32)).nnz == 0
     assert all(level.A.format == "bsr" for level in solver.hierarchy.levels[1:])
     stiffer = (matrix + sp.identity(matrix.shape[0], format="bsr")).tobsr(blocksize=(3, 3))
     before = solver.precondition(rhs)
