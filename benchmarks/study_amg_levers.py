@@ -29,6 +29,8 @@ time in ``mv [ms]``). The variants:
                        finest level's triangles, P and R then held in single precision, P as CSR, R its view)
 ``finest_double``      the finest level's triangles, P and R held in double precision (BSR P and R), as
                        until stop 26 (``amg.FINEST_DTYPE``)
+``galerkin_whole``     the coarse matrices R A P as one product, not :data:`amg.GALERKIN_CHUNKS` row blocks of R
+                       at a time (the same matrices; the build's peak memory is the difference)
 ``coarse_unsmoothed``  P smoothed on the finest level only; the tentative T is P on the coarser levels
 ``filtered``           P smoothed with A filtered to the strength pattern, as pyamg's ``filter_entries``: only the
                        strong block couplings (and the diagonal) of A in A T and in the row sums D, then the
@@ -186,6 +188,7 @@ def translations_only(matrix, near_null_space, **options):
 VARIANTS = {
     "base": (None, {}),
     "finest_double": (None, {}, {"FINEST_DTYPE": np.float64}),
+    "galerkin_whole": (None, {}, {"GALERKIN_CHUNKS": 1}),
     "coarse_unsmoothed": (functools.partial(levels, smooth_coarse=False), {}),
     "filtered": (functools.partial(levels, filtered=True), {}),
     "naive": (functools.partial(levels, aggregate=naive_aggregation), {}),

@@ -302,6 +302,19 @@ def test_a_scaled_system_solves_as_the_plain_one_beyond_single_precision(system,
     np.testing.assert_allclose(scaled * matrix_scale / rhs_scale, plain, rtol=0, atol=1e-6 * np.abs(plain).max())
 
 
+@pytest.mark.parametrize("chunks", [8, 7, 1])
+def test_the_galerkin_product_by_row_blocks_is_the_whole_product(system, monkeypatch, chunks):
+    """R A P made a few block rows of R at a time (the build's peak memory) is the whole product's arrays, bit for
+    bit: each row of a scipy product comes from that row of the left factor alone."""
+    matrix, modes, _ = system
+    monkeypatch.setattr(amg, "GALERKIN_CHUNKS", chunks)
+    level = amg._smoothed_aggregation(matrix, modes, theta=0.05, excluded=None, max_coarse=300).levels[0]
+    assert level.R.shape[0] // level.R.blocksize[0] >= 2 * 8  # enough block rows to be split
+    whole, pieces = level.R @ matrix @ level.P, amg._galerkin(level.R, matrix, level.P)
+    assert pieces.format == "bsr" and pieces.blocksize == whole.blocksize and pieces.shape == whole.shape
+    assert all(np.array_equal(getattr(pieces, part), getattr(whole, part)) for part in ("data", "indices", "indptr"))
+
+
 def _blocks_with_zeros(matrix):
     """``matrix`` (BSR) with a few stored entries set to zero, on and off the diagonal blocks (they must survive)."""
     copy = matrix.copy()
