@@ -83,11 +83,13 @@ class SpringTopology:
     shell_thickness: float = 0.0
 
     def __post_init__(self):
+        # Arrays of their own (shaped before they are copied, so that none is a view), read-only below: a model's
+        # element sets share them instead of copying them.
         points = np.array(self.points, dtype=np.float64, copy=True)
-        springs = np.array(self.springs, dtype=np.int64, copy=True).reshape(-1, 2)
-        kinds = np.array(self.kinds, dtype=np.int8, copy=True).ravel()
-        triangles = np.array(self.shell_triangles, dtype=np.int64, copy=True).reshape(-1, 3)
-        layer = np.array(self.shell_layer, dtype=np.int64, copy=True).ravel()
+        springs = np.array(np.reshape(self.springs, (-1, 2)), dtype=np.int64, copy=True)
+        kinds = np.array(np.ravel(self.kinds), dtype=np.int8, copy=True)
+        triangles = np.array(np.reshape(self.shell_triangles, (-1, 3)), dtype=np.int64, copy=True)
+        layer = np.array(np.ravel(self.shell_layer), dtype=np.int64, copy=True)
         n = len(points)
         if points.ndim != 2 or points.shape[1] != 3:
             raise ValueError(f"points must have shape (n, 3), got {points.shape}")
@@ -153,8 +155,10 @@ class SpringTopology:
 
     @cached_property
     def rest_lengths(self) -> np.ndarray:
-        """(s,) float -- rest length of each spring [m]."""
-        return vector_lengths(self.points[self.springs[:, 1]] - self.points[self.springs[:, 0]])
+        """(s,) float -- rest length of each spring [m] (read-only, as the springs)."""
+        lengths = vector_lengths(self.points[self.springs[:, 1]] - self.points[self.springs[:, 0]])
+        lengths.setflags(write=False)
+        return lengths
 
     def kind_mask(self, kind: str) -> np.ndarray:
         """(s,) bool -- the springs of one kind, by label."""

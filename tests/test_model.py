@@ -214,3 +214,26 @@ def test_shells_add_their_own_mass_and_stiffen_every_shell_spring(rule):
     # Tet edges get the same stiffness as without shells: prisms touch only shell springs.
     alone = Model.from_mesh(mesh, STEEL_LIKE, rule=rule)
     assert np.allclose(np.sort(model.stiffness[~shell_springs]), np.sort(alone.stiffness), rtol=1e-14)
+
+
+def test_a_models_springs_share_their_topologys_arrays_and_copy_what_could_change():
+    """The spring set holds the topology's node pairs and rest lengths themselves (read-only arrays of their own, so
+    nothing can change them), not copies; an array that could still change (writeable, or a read-only view of a
+    writeable one) is copied."""
+    from volspring.elements import Springs
+
+    model = Model.from_mesh(cube_mesh(), Material(1e6, 0.3, 1000.0))
+    topology, springs = model.topology, model.elements[0]
+    assert np.shares_memory(springs.pairs, topology.springs) and np.shares_memory(springs.rest_lengths,
+                                                                                  topology.rest_lengths)
+    writeable = topology.springs.copy()
+    view = writeable.view()
+    view.setflags(write=False)
+    n, s = model.node_count, topology.spring_count
+    for pairs in (writeable, view):
+        made = Springs(n, pairs, 1.0, 0.0, topology.rest_lengths, 0)
+        assert not np.shares_memory(made.pairs, writeable)
+        writeable[0] = [0, 1] if tuple(writeable[0]) != (0, 1) else [0, 2]  # a later change does not reach it
+        assert np.array_equal(made.pairs, topology.springs)
+        writeable[0] = topology.springs[0]
+    assert len(made.stiffness) == s

@@ -281,11 +281,27 @@ class SpringLinearization(Linearization):
 
 
 # ---------------------------------------------------------------------------- input checks
+def _immutable(value, dtype, shape) -> bool:
+    """Whether ``value`` is a C-contiguous ``dtype`` array of ``shape`` that nothing can write to: read-only, and so is
+    every array it views (a read-only view of a writeable array is not)."""
+    if not isinstance(value, np.ndarray) or value.dtype != dtype or value.shape != tuple(shape) or \
+            not value.flags.c_contiguous:
+        return False
+    while isinstance(value, np.ndarray):
+        if value.flags.writeable:
+            return False
+        value = value.base
+    return value is None
+
+
 def per_item_array(name, value, count, *, allow_zero) -> np.ndarray:
     """(count,) float -- a number or array of numbers broadcast to one per spring (or node), checked."""
-    array = _real_array(name, value)
+    if _immutable(value, np.float64, (count,)):
+        array = value  # shared, not copied: nothing can change it (a model's springs share their topology's)
+    else:
+        array = _real_array(name, value)
     try:
-        array = np.broadcast_to(array, (count,)).copy()
+        array = value if array is value else np.broadcast_to(array, (count,)).copy()
     except ValueError:
         raise ValueError(f"{name} has shape {array.shape}; expected a number or shape ({count},)") from None
     bad = ~np.isfinite(array) | (array < 0) | ((array == 0) & (not allow_zero))
@@ -311,7 +327,8 @@ def checked_pairs(springs, node_count) -> np.ndarray:
     if array.ndim != 2 or array.shape[1] != 2:
         raise ValueError(f"springs have shape {array.shape}; expected (s, 2), one node pair per spring "
                          "(e.g. [[0, 1]] for one spring)")
-    array = array.astype(np.int64)
+    if not _immutable(springs, np.int64, array.shape):
+        array = array.astype(np.int64)
     outside = ((array < 0) | (array >= node_count)).any(axis=1)
     if outside.any():
         e = int(np.flatnonzero(outside)[0])
