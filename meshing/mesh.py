@@ -204,21 +204,23 @@ class TetMesh:
         return np.array([self.points.min(axis=0), self.points.max(axis=0)])
 
     # ------------------------------------------------------------------ topology
-    @cached_property
-    def _edge_table(self):
-        pairs = np.sort(self.tets[:, TET_EDGES].reshape(-1, 2), axis=1)
-        edges, inverse = np.unique(pairs, axis=0, return_inverse=True)
-        return edges, inverse.reshape(-1, 6)
+    def _tet_edge_pairs(self) -> np.ndarray:
+        """(6 m, 2) int64 -- every tet's edges, in ``TET_EDGES`` order, each as (i, j) with i < j."""
+        return np.sort(self.tets[:, TET_EDGES].reshape(-1, 2), axis=1)
 
-    @property
+    @cached_property
     def edges(self) -> np.ndarray:
         """(e, 2) int64 -- each unique tet edge once, as (i, j) with i < j, sorted."""
-        return self._edge_table[0]
+        return np.ascontiguousarray(np.unique(self._tet_edge_pairs(), axis=0))
 
     @property
     def tet_edge_index(self) -> np.ndarray:
-        """(m, 6) int64 -- index into :attr:`edges` of each tet's edges, in ``TET_EDGES`` order."""
-        return self._edge_table[1]
+        """(m, 6) int64 -- index into :attr:`edges` of each tet's edges, in ``TET_EDGES`` order. Made on each access
+        (searched in the sorted edges), not kept: 48 bytes a tet, for a table a model reads once."""
+        n = np.int64(self.node_count)
+        keys = self.edges[:, 0] * n + self.edges[:, 1]  # increasing: the edges are sorted by (i, j)
+        pairs = self._tet_edge_pairs()
+        return np.searchsorted(keys, pairs[:, 0] * n + pairs[:, 1]).reshape(-1, 6)
 
     @cached_property
     def edge_lengths(self) -> np.ndarray:

@@ -38,6 +38,10 @@ def test_edges_are_unique_and_indexed_from_tets():
 
     rebuilt = np.sort(mesh.tets[:, TET_EDGES], axis=2)
     assert np.array_equal(edges[mesh.tet_edge_index], rebuilt)
+    # The index is made on request, not kept with the mesh (48 bytes a tet, read once by a model).
+    assert not any(isinstance(value, np.ndarray) and value.size == mesh.tets.size + len(mesh.tets) * 2
+                   for value in vars(mesh).values())
+    assert all(not isinstance(value, tuple) for value in vars(mesh).values())
 
 
 def test_node_volumes_sum_to_total():
