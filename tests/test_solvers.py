@@ -112,6 +112,8 @@ def test_default_smoother_sweeps_the_finest_level_point_wise_on_the_current_matr
     assert (finest.whole() != matrix.astype(np.float32)).nnz == 0
     # Its P in single precision as CSR, R the transpose as a view of P's arrays (no copy), both equal to the built
     # double P rounded (that P, built again in double, is the reference).
+    # The levels are the kept copy (a pickle carries them): the near-null space is not kept.
+    assert solver._source.near_null_space is None and solver.hierarchy.levels[0].B is None
     level = solver.hierarchy.levels[0]
     assert level.P.format == "csr" and level.P.dtype == np.float32 and amg._transposed(level)
     assert (level.R != level.P.T).nnz == 0

@@ -281,7 +281,9 @@ class _Source:
     # Frozen copy of the fine matrix. With the default smoother it is the triangles of the hierarchy's finest level
     # (one copy, the same object, in single precision within its range), except for a two-level cycle.
     matrix: sp.spmatrix | _Triangles
-    near_null_space: np.ndarray   # (N, k) or, with a prolongation, (n, k)
+    # (N, k) or, with a prolongation, (n, k); None once the default smoother's levels are the kept copy (a pickle
+    # carries them: nothing is rebuilt from the source then).
+    near_null_space: np.ndarray | None
     prolongation: sp.spmatrix | None = None  # (N, n): coarse space of a two-level cycle
     # The couplings of ``matrix`` that neither decide the aggregates nor smooth the prolongators: the matrix minus the
     # build's ``aggregation`` (contact, a few rows), CSR; None: none.
@@ -539,18 +541,20 @@ class AMGConjugateGradient(_LinearSolver):
         source = self._source
         if source is None:
             raise ValueError("the AMG hierarchy has no source: call build(matrix, near_null_space) first")
+        modes = source.near_null_space
+        assert modes is not None  # dropped only where the levels are the kept copy, never rebuilt from the source
         matrix = source.matrix
         if source.prolongation is not None:
             matrix = (source.prolongation.T @ matrix @ source.prolongation).tocsr()
         elif isinstance(matrix, _Triangles):  # a rebuild of a solver pickled before its levels travelled
             matrix = matrix.whole().astype(np.float64, copy=False)
-        hierarchy = _smoothed_aggregation(matrix, source.near_null_space, theta=self.strength_theta,
-                                          excluded=source.excluded, max_coarse=self.max_coarse)
+        hierarchy = _smoothed_aggregation(matrix, modes, theta=self.strength_theta, excluded=source.excluded,
+                                          max_coarse=self.max_coarse)
         if self.strength_theta and hierarchy.operator_complexity() > 2.5:
             # Dropping weak couplings can slow coarsening on odd meshes: fall back to keeping all.
-            hierarchy = _smoothed_aggregation(matrix, source.near_null_space, theta=0.0,
-                                              excluded=source.excluded, max_coarse=self.max_coarse)
-        del matrix  # the whole matrix made from kept triangles goes once the hierarchy is built (peak memory)
+            hierarchy = _smoothed_aggregation(matrix, modes, theta=0.0, excluded=source.excluded,
+                                              max_coarse=self.max_coarse)
+        del matrix, modes  # the whole matrix made from kept triangles goes once the hierarchy is built (peak memory)
         if self.smoother == "gauss_seidel" and len(hierarchy.levels) > 1:
             finest = hierarchy.levels[0].A
             if isinstance(source.matrix, _Triangles):
@@ -566,8 +570,11 @@ class AMGConjugateGradient(_LinearSolver):
                     _single_transfer(hierarchy.levels[0], dtype)
                 self._coarse_triangles(hierarchy)
                 finest = _Triangles(finest, point_wise=True, dtype=dtype)
-                if source.prolongation is None:  # a new build: from now on the triangles are the kept copy
-                    source = self._source = replace(source, matrix=finest)
+                if source.prolongation is None:
+                    # A new build: from now on the triangles are the kept copy, and the levels themselves what a
+                    # pickle carries, so the near-null space (48 bytes an unknown) is not needed again.
+                    source = self._source = replace(source, matrix=finest, near_null_space=None)
+                    hierarchy.levels[0].B = None
             self._set_triangles(hierarchy, finest)
         else:
             self._set_smoothers(hierarchy)
