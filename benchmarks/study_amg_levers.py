@@ -43,7 +43,7 @@ time in ``mv [ms]``). The variants:
 ``max_coarse_3000``    up to 3000 unknowns on the coarsest level (solved by sparse LU; option ``max_coarse``)
 ``galerkin_rap``       coarse matrix R (A P) instead of (R A) P
 ``csr_p``              P built as in ``base`` (BSR products), then held as CSR and R as its transpose, a CSC
-                       view (no copy): the V-cycle's restriction and prolongation by scalar products
+                       view (no copy), on every level (``base`` does so on the finest, in single precision)
 =====================  ===========================================================================================
 
 The old study's ``float32`` and ``coarse_jacobi`` variants are gone: they swapped pyamg's block Gauss-Seidel
@@ -60,34 +60,38 @@ Run (numpy/scipy threads are held to one before numpy is imported)::
 
 A study, not a test: the variants run one after the other in this process, and the figures are ratios from one run.
 
-Measured in one run on a 2-vCPU machine (``OMP_NUM_THREADS=1 python benchmarks/study_amg_levers.py``, 45 s; 10,309
-nodes, 30,420 unknowns, one mat-vec 0.75-0.82 ms)::
+Measured in one run on a 2-vCPU machine (``OMP_NUM_THREADS=1 python benchmarks/study_amg_levers.py``, 2 min; 10,309
+nodes, 30,420 unknowns, one mat-vec 0.76-0.77 ms)::
 
-    variant             build rejected   CG V-cycle op.cx   step step CG builds     P+R mv [ms]  levels (unknowns)
-    base                  173        -    6    5.36  1.66   60.1     4.2      1    1.40    0.79  30420/3018/222
-    coarse_unsmoothed     175        -    8    5.49  1.65   67.2     5.5      1    1.22    0.78  30420/3018/222
-    filtered              276        -    6    5.26  1.62   68.4     4.4      1    1.22    0.80  30420/3018/228
-    naive                5898    13.64    5   45.31 10.07  193.0     3.8      1    3.86    0.83  30420/16560/588
-    translations           93        -   22    4.14  1.16   79.9    10.9      1    0.67    0.76  30420/1509/111
-    theta_0               146        -    9    5.22  1.53   70.1     6.2      1    1.22    0.76  30420/2706/72
-    theta_0.2             774     5.50    9    5.39  1.53   71.8     6.2      1    1.22    0.75  30420/2706/72
-    max_coarse_3000       264        -    5    5.72  1.63   64.4     3.9      1    1.19    0.78  30420/3018
-    galerkin_rap          176        -    6    5.88  1.66   62.8     4.2      1    1.40    0.74  30420/3018/222
-    csr_p                 187        -    6    6.36  1.66   72.7     4.2      1    1.03    0.74  30420/3018/222
+    variant             build rejected   CG V-cycle op.cx   step step CG builds     P+R  finest mv [ms]  levels
+    base                  190        -    6    5.73  1.66   61.2     4.2      1    0.80    1.04    0.77  30420/3018/222
+    finest_double         192        -    6    5.95  1.66   65.5     4.2      1    1.40    1.54    0.77  30420/3018/222
+    galerkin_whole        179        -    6    5.47  1.66   61.5     4.2      1    0.80    1.04    0.77  30420/3018/222
+    coarse_unsmoothed     150        -    8    5.40  1.65   67.4     5.5      1    0.62    1.04    0.77  30420/3018/222
+    filtered              298        -    6    5.42  1.62   58.5     4.4      1    0.65    1.04    0.77  30420/3018/228
+    naive                6359    13.64    5   48.99 10.07  201.7     3.8      1    2.69    1.04    0.77  30420/16560/588
+    translations          100        -   22    4.27  1.16   77.8    10.9      1    0.36    1.04    0.77  30420/1509/111
+    theta_0               150        -    9    5.22  1.53   65.2     6.2      1    0.66    1.04    0.76  30420/2706/72
+    theta_0.2             757     5.50    9    5.23  1.53   66.0     6.2      1    0.66    1.04    0.76  30420/2706/72
+    max_coarse_3000       279        -    5    5.65  1.63   65.3     3.9      1    0.59    1.04    0.76  30420/3018
+    galerkin_rap          181        -    6    5.60  1.66   62.1     4.2      1    0.80    1.04    0.76  30420/3018/222
+    csr_p                 228        -    6    5.63  1.66   63.3     4.2      1    0.74    1.04    0.76  30420/3018/222
 
-Iterations, complexities and levels are exact (the same in every run). The times are not: between five runs on this
-machine (one beside the test suite) a V-cycle moved by up to 20% and a step by up to 40% (assembly and CG; the warm
-start takes CG from 6 to 3 iterations over the ten steps). ``galerkin_rap`` builds ``base``'s levels to rounding, so
-the gap between their V-cycles and steps is noise. Read from the five runs, no lever is clearly ahead of ``base`` on
-the step. ``theta_0`` builds 16-23% faster and ``coarse_unsmoothed`` 3-18% (6% slower in the run beside the tests),
-for 3 and 2 more CG iterations from zero (2 and 1.3 more per step); ``translations`` builds in half the time for 22
-CG iterations instead of 6; ``filtered`` builds in 1.5 times the time for a V-cycle 1-11% cheaper and 0.2 more CG
-iterations per step (its step came out 3-13% below ``base``'s, within the noise); ``max_coarse_3000`` builds in 1.5
-times the time for one CG iteration fewer; ``theta_0.2``'s hierarchy (complexity 5.5) is thrown away and
-``theta_0``'s built instead, about 4 times ``base``'s build in all; ``naive`` coarsens too slowly (complexity 10,
-about 35 times the build); ``csr_p`` holds P and R in 1.03 KiB per node instead of 1.40 (no stored R, but an index
-per entry instead of per block) for a V-cycle from 0.14 mv cheaper to 1.0 dearer over three runs (scalar products
-in place of blocks), and 0.37 KiB per node is not the 2 issue 15's memory goal is short of.
+Iterations, complexities, levels and memory are exact (the same in every run). The times are not: between runs on
+this machine a V-cycle moved by up to 20% and a step by up to 40% (assembly and CG; the warm start takes CG from 6 to
+3 iterations over the ten steps). ``galerkin_rap`` and ``galerkin_whole`` build ``base``'s levels (to rounding, and
+bit for bit), so the gaps between their V-cycles and steps are noise. Read from several runs, the levers that paid
+are in ``base``: against ``finest_double`` (the default before) the finest level in single precision holds its
+triangles in 1.04 KiB per node instead of 1.54 and every level's P and R in 0.80 instead of 1.40, for a V-cycle
+4-9% cheaper at 10k nodes and 45k (``--nodes 45000 --variants base finest_double``: 9.5-9.9 mv against 10.3-10.6)
+and the same CG iterations. No other lever is clearly ahead of ``base`` on the step. ``theta_0`` builds 16-23%
+faster and ``coarse_unsmoothed`` 3-21%, for 3 and 2 more CG iterations from zero (2 and 1.3 more per step);
+``translations`` builds in half the time for 22 CG iterations instead of 6; ``filtered`` builds in 1.5 times the time
+for a V-cycle 1-11% cheaper and 0.2 more CG iterations per step; ``max_coarse_3000`` builds in 1.5 times the time for
+one CG iteration fewer; ``theta_0.2``'s hierarchy (complexity 5.5) is thrown away and ``theta_0``'s built instead,
+about 4 times ``base``'s build in all; ``naive`` coarsens too slowly (complexity 10, about 35 times the build);
+``csr_p`` holds the coarser levels' P as CSR too (their R a view) for 0.06 KiB per node less, with scalar products in
+place of blocks there.
 """
 
 import os
@@ -331,7 +335,7 @@ def main():
     print(f"README beam, cells {5 * cells} x {cells} x {cells}: {scene.model.node_count} nodes, {matrix.shape[0]} "
           f"unknowns; dt = {DT} s, steps 3 to {args.steps}; times in mat-vecs (mv) with the first step's matrix")
     print(f"{'variant':<18} {'build':>6} {'rejected':>8} {'CG':>4} {'V-cycle':>7} {'op.cx':>5} {'step':>6} "
-          f"{'step CG':>7} {'builds':>6} {'P+R':>7} {'finest':>7} {'mv [ms]':>7}  levels (unknowns)")
+          f"{'step CG':>7} {'builds':>6} {'P+R':>7} {'finest':>7} {'mv [ms]':>7}  levels")
     for variant in args.variants:
         measure(variant, scene, matrix, modes, args.steps)
 

@@ -217,11 +217,11 @@ def _single_transfer(level, dtype) -> None:
     time; ``python benchmarks/study_amg_levers.py --variants base finest_double``)."""
     prolongation = level.P
     level.R = None  # the BSR transpose goes first (peak memory)
-    blocks = sp.bsr_matrix((prolongation.data.astype(dtype), prolongation.indices, prolongation.indptr),
-                           shape=prolongation.shape)
+    if prolongation.format == "bsr":  # cast by blocks first: no double-precision CSR copy
+        prolongation = sp.bsr_matrix((prolongation.data.astype(dtype), prolongation.indices, prolongation.indptr),
+                                     shape=prolongation.shape)
+    level.P = sp.csr_matrix(prolongation, dtype=dtype)
     del prolongation
-    level.P = blocks.tocsr()
-    del blocks
     level.R = level.P.T
 
 
