@@ -73,7 +73,9 @@ def measure(k: int, steps: int, smoother: str) -> None:
     for index, level in enumerate(hierarchy.levels[:-1]):
         # The guess in the level's own type, as the cycle's z (the finest level sweeps in single precision).
         vector, guess = generator.standard_normal(level.A.shape[0]), np.zeros(level.A.shape[0], dtype=level.A.dtype)
-        coarse = np.ones(level.P.shape[1])
+        # R and P take vectors of their own type, as in the cycle (a single-precision P or R given a double vector
+        # would be copied to double first).
+        residual, coarse = vector.astype(level.R.dtype), np.ones(level.P.shape[1], dtype=level.P.dtype)
         head = f"    {index}: {level.A.shape[0]:>7} {level.A.nnz:>9} {str(getattr(level.A, 'blocksize', None) or (1, 1)):>7}:"
         if isinstance(level.A, _Triangles):  # what the cycle runs: a sweep from zero and -U z, then a full sweep
             smoothing = (f" sweep from zero + residual {per_call(lambda: level.A.forward_from_zero(vector)) / mv:.2f} mv,"
@@ -82,7 +84,7 @@ def measure(k: int, steps: int, smoother: str) -> None:
             smoothing = (f" pre-smoothing {per_call(lambda: level.presmoother(level.A, guess, vector)) / mv:.2f} mv,"
                          f" post-smoothing {per_call(lambda: level.postsmoother(level.A, guess, vector)) / mv:.2f},"
                          f" A x {per_call(lambda: level.A @ vector) / mv:.2f}")
-        print(head + smoothing + f", R x {per_call(lambda: level.R @ vector) / mv:.2f}, "
+        print(head + smoothing + f", R x {per_call(lambda: level.R @ residual) / mv:.2f}, "
               f"P x {per_call(lambda: level.P @ coarse) / mv:.2f}")
     last = hierarchy.levels[-1]
     vector = generator.standard_normal(last.A.shape[0])
