@@ -81,7 +81,8 @@ def _v_cycle(hierarchy):
         if largest == 0.0:
             return np.zeros_like(r)
         exponent = int(np.frexp(largest)[1]) - 1 if np.isfinite(largest) else 0
-        return np.ldexp(apply(np.ldexp(r, -exponent)).astype(r.dtype), exponent)
+        scaled = np.ldexp(r, -exponent).astype(levels[0].A.dtype)  # once here, not in each sweep
+        return np.ldexp(apply(scaled).astype(r.dtype), exponent)
 
     return cycle
 
