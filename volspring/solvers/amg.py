@@ -321,7 +321,8 @@ class AMGConjugateGradient(_LinearSolver):
         hold 1.08 KiB per node instead of 1.61 and P with R 0.61 instead of 1.22, and a V-cycle costs 9.5-9.9
         mat-vecs instead of 10.3-10.6, for the same CG iterations (``python benchmarks/study_amg_levers.py
         --nodes 45000 --variants base finest_double``); the cycle is then symmetric to single-precision
-        rounding (about 1e-7 relative), which left CG's iterations unchanged down to rtol 1e-9 there. The
+        rounding (about 1e-7 relative), which left CG's iterations unchanged down to rtol 1e-9 there (0-3%
+        more at nu 0.499 on the springs+volume and smoothed rungs, which need 30-290 either way). The
         coarser levels' block products and sweeps are slower in single precision (scipy's and pyamg's
         kernels: 10-25% per product) and stay double.
     max_coarse : int
