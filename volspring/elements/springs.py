@@ -300,10 +300,10 @@ def per_item_array(name, value, count, *, allow_zero) -> np.ndarray:
         array = value  # shared, not copied: nothing can change it (a model's springs share their topology's)
     else:
         array = _real_array(name, value)
-    try:
-        array = value if array is value else np.broadcast_to(array, (count,)).copy()
-    except ValueError:
-        raise ValueError(f"{name} has shape {array.shape}; expected a number or shape ({count},)") from None
+        try:
+            array = np.broadcast_to(array, (count,)).copy()
+        except ValueError:
+            raise ValueError(f"{name} has shape {array.shape}; expected a number or shape ({count},)") from None
     bad = ~np.isfinite(array) | (array < 0) | ((array == 0) & (not allow_zero))
     if bad.any():
         first = np.flatnonzero(bad)[0]

@@ -231,10 +231,11 @@ def _finest_dtype(matrix) -> np.dtype:
     data = matrix.data
     largest = max(float(data.max()), -float(data.min())) if data.size else 0.0
     diagonal = np.abs(matrix.diagonal())
-    inside = largest <= SINGLE_PRECISION_RANGE and (not diagonal.size or diagonal.min() >= 1 / SINGLE_PRECISION_RANGE)
+    smallest = float(diagonal.min()) if diagonal.size else np.inf
+    inside = largest <= SINGLE_PRECISION_RANGE and smallest >= 1 / SINGLE_PRECISION_RANGE
     if not inside:
         logger.debug("finest AMG level held in double precision: largest entry %.3g, smallest diagonal %.3g",
-                     largest, diagonal.min() if diagonal.size else 0.0)
+                     largest, smallest)
     return np.dtype(FINEST_DTYPE if inside else matrix.dtype)
 
 
