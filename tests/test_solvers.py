@@ -317,6 +317,31 @@ def test_the_galerkin_product_by_row_blocks_is_the_whole_product(system, monkeyp
     assert all(np.array_equal(getattr(pieces, part), getattr(whole, part)) for part in ("data", "indices", "indptr"))
 
 
+@pytest.mark.parametrize("duplicates", [False, True])
+def test_block_duplicates_are_summed_as_scipy_sums_them(duplicates):
+    """The solver's own BSR canonical form (scipy's is a Python loop over the blocks) gives scipy's arrays bit for
+    bit: a Galerkin product's unsorted columns, and blocks stored twice or three times in one row."""
+    generator = np.random.default_rng(5)
+    rows, columns = generator.integers(0, 40, 400), generator.integers(0, 40, 400)
+    if not duplicates:
+        keys = np.unique(rows * 40 + columns)
+        rows, columns = keys // 40, keys % 40
+        order = generator.permutation(len(rows))  # unsorted within rows, as a product leaves them
+        rows, columns = rows[order], columns[order]
+    order = np.argsort(rows, kind="stable")
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(rows, minlength=40))]).astype(np.int32)
+    data = generator.standard_normal((len(rows), 3, 6))
+    ours = sp.bsr_matrix((data[order], columns[order].astype(np.int32), indptr), shape=(120, 240))
+    theirs = ours.copy()
+    assert not ours.has_sorted_indices
+    amg._sum_duplicates(ours)
+    theirs.sum_duplicates()
+    assert ours.has_canonical_format and len(ours.indices) < len(rows) if duplicates else len(ours.indices) == len(rows)
+    for part in ("data", "indices", "indptr"):
+        assert np.array_equal(getattr(ours, part), getattr(theirs, part)) and \
+            getattr(ours, part).dtype == getattr(theirs, part).dtype, part
+
+
 def _blocks_with_zeros(matrix):
     """``matrix`` (BSR) with a few stored entries set to zero, on and off the diagonal blocks (they must survive)."""
     copy = matrix.copy()
