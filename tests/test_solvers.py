@@ -85,6 +85,27 @@ def test_v_cycle_adapter_equals_pyamg_public_preconditioner_bit_for_bit(system, 
     assert x.tobytes() == y.tobytes() and info.iterations == iterations
 
 
+def test_the_coarse_solve_is_pyamgs_sparse_lu_bit_for_bit_with_empty_columns_left_out():
+    """The coarsest level is solved by index where pyamg's LU solver multiplies by a selection matrix and its
+    transpose on every call: the same numbers, also when the coarsest matrix has empty rows and columns (a
+    candidate an aggregate cannot carry), which both leave out of the factors and answer with zeros."""
+    from pyamg.multilevel import MultilevelSolver
+
+    generator = np.random.default_rng(6)
+    root = generator.standard_normal((12, 12))
+    dense = root @ root.T + 12 * np.eye(12)
+    dense[[3, 8], :] = dense[:, [3, 8]] = 0.0
+    level = MultilevelSolver.Level()
+    level.A = sp.csr_matrix(dense)
+    hierarchy = MultilevelSolver([level], coarse_solver="splu")
+    b = generator.standard_normal(12)
+    theirs = hierarchy.coarse_solver(level.A, b)
+    ours = amg._coarse_solve(hierarchy)(b)
+    assert ours.tobytes() == theirs.tobytes() and ours[3] == ours[8] == 0.0
+    kept = [i for i in range(12) if i not in (3, 8)]
+    np.testing.assert_allclose(dense[np.ix_(kept, kept)] @ ours[kept], b[kept], rtol=1e-12)  # and it solves
+
+
 @pytest.mark.parametrize("smoother", SMOOTHERS)
 def test_every_smoother_makes_a_symmetric_positive_definite_v_cycle(system, smoother):
     """CG needs an SPD preconditioner: each forward sweep before the coarse correction is undone by a backward
