@@ -38,6 +38,8 @@ time in ``mv [ms]``). The variants:
                        ``satisfy_constraints``)
 ``naive``              pyamg's ``naive_aggregation`` instead of ``standard_aggregation``
 ``translations``       the three translations as the whole near-null space (coarse blocks 3 x 3, not 6 x 6)
+``coarse_translations`` the six rigid-body modes on the finest level, their three translations below it (the
+                       first coarse level's blocks stay 6 x 6, its P's are 6 x 3, the next levels' 3 x 3)
 ``theta_0``            strength threshold 0: every block coupling is strong (option ``strength_theta``)
 ``theta_0.2``          strength threshold 0.2 instead of 0.05
 ``max_coarse_3000``    up to 3000 unknowns on the coarsest level (solved by sparse LU; option ``max_coarse``)
@@ -124,14 +126,15 @@ PACKAGE_LEVELS = amg._smoothed_aggregation
 
 
 def levels(matrix, near_null_space, *, theta, excluded, max_coarse, aggregate=standard_aggregation,
-           smooth_coarse=True, filtered=False, right_first=False, csr_p=False):
+           smooth_coarse=True, filtered=False, right_first=False, csr_p=False, coarse_modes=None):
     """:func:`volspring.solvers.amg._smoothed_aggregation`'s loop from the package's own steps, with the levers (the
     defaults: none).
 
     ``aggregate``: pyamg's aggregation function; ``smooth_coarse``: smooth P below the finest level too (else the
     tentative T); ``filtered``: smooth P with the strong part of A (:func:`strong_part`) and project the correction
     as pyamg's ``filter_entries`` does; ``right_first``: the coarse matrix as R (A P); ``csr_p``: P held as CSR and R
-    as its CSC transpose.
+    as its CSC transpose; ``coarse_modes``: the first this many candidates (the translations) only, on the levels
+    below the first coarse one.
     """
     level = MultilevelSolver.Level()
     level.A, level.B = matrix, near_null_space
@@ -153,7 +156,8 @@ def levels(matrix, near_null_space, *, theta, excluded, max_coarse, aggregate=st
             level.R = level.P.T
         excluded = amg._excluded_below(level.P, excluded)
         level = MultilevelSolver.Level()
-        level.A, level.B = coarse, candidates
+        level.A = coarse
+        level.B = candidates if coarse_modes is None else np.ascontiguousarray(candidates[:, :coarse_modes])
         hierarchy.append(level)
         matrix = coarse
     return MultilevelSolver(hierarchy, coarse_solver="splu")
@@ -197,6 +201,7 @@ VARIANTS = {
     "filtered": (functools.partial(levels, filtered=True), {}),
     "naive": (functools.partial(levels, aggregate=naive_aggregation), {}),
     "translations": (translations_only, {}),
+    "coarse_translations": (functools.partial(levels, coarse_modes=3), {}),
     "theta_0": (None, {"strength_theta": 0.0}),
     "theta_0.2": (None, {"strength_theta": 0.2}),
     "max_coarse_3000": (None, {"max_coarse": 3000}),
