@@ -44,7 +44,7 @@ import scipy.sparse as sp
 
 from volspring.elements.base import BlockMap, ElementSet, Linearization, OperatorLinearization
 from volspring.elements.tet_kinematics import (SmoothingDomains, TetGradients, corotated, corotational, pair_nodes,
-                                              twist_directions, twist_rows)
+                                              sparse_layout, twist_directions, twist_rows)
 from volspring.material import _real_array, _real_number
 from typing import TYPE_CHECKING, Self
 
@@ -270,7 +270,8 @@ class CorotatedTets(_TetContinuum):
         tets = self.kinematics.tets
         T = len(tets)
         columns = (3 * np.repeat(tets, 3, axis=1) + np.tile(np.arange(3), 4)).reshape(T, 1, 12)
-        return np.broadcast_to(columns, (T, 3, 12)).ravel(), np.arange(0, 36 * T + 1, 12)
+        return sparse_layout(np.broadcast_to(columns, (T, 3, 12)).ravel(), np.arange(0, 36 * T + 1, 12),
+                             3 * self.node_count)
 
     @cached_property
     def _scalar_part(self):

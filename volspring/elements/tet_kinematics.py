@@ -279,6 +279,15 @@ def twist_rows(U: np.ndarray, Vt: np.ndarray, vectors: np.ndarray) -> np.ndarray
     return np.matmul(left.transpose(0, 2, 1, 3), right.transpose(0, 2, 3, 1))  # (m, r, k, c)
 
 
+def sparse_layout(indices: np.ndarray, indptr: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """A CSR layout made once and filled at every linearisation, in the index type scipy keeps it in (int32 while the
+    counts fit): given int64, scipy converts both arrays on every ``csr_matrix((data, indices, indptr))``, 0.9 ms for
+    the twist rows of 15,360 tets."""
+    largest = max(int(columns), len(indptr), int(indptr[-1]) if len(indptr) else 0)
+    dtype = np.int32 if largest < np.iinfo(np.int32).max else np.int64
+    return np.ascontiguousarray(indices, dtype=dtype), np.ascontiguousarray(indptr, dtype=dtype)
+
+
 class SmoothingDomains:
     """The smoothing domains of a tet mesh (see the module docstring), grouped by region.
 
@@ -392,7 +401,7 @@ class SmoothingDomains:
         counts = np.bincount(self.ring_domain, minlength=self.domain_count)
         indices = (3 * self.ring_node[:, None] + np.arange(3)).ravel()
         indptr = np.concatenate([[0], 3 * np.cumsum(counts)])
-        return indices, indptr
+        return sparse_layout(indices, indptr, 3 * self.node_count)
 
     @cached_property
     def pairs(self) -> tuple:
