@@ -357,7 +357,8 @@ def test_block_duplicates_are_summed_as_scipy_sums_them(duplicates):
     assert not ours.has_sorted_indices
     amg._sum_duplicates(ours)
     theirs.sum_duplicates()
-    assert ours.has_canonical_format and len(ours.indices) < len(rows) if duplicates else len(ours.indices) == len(rows)
+    assert ours.has_canonical_format
+    assert len(ours.indices) < len(rows) if duplicates else len(ours.indices) == len(rows)
     for part in ("data", "indices", "indptr"):
         assert np.array_equal(getattr(ours, part), getattr(theirs, part)) and \
             getattr(ours, part).dtype == getattr(theirs, part).dtype, part

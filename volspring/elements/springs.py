@@ -218,8 +218,8 @@ class Springs(ElementSet):
 
     @cached_property
     def _gathering(self) -> sp.csc_matrix:
-        """(s, n) -- the incidence's transpose, a CSC view of its arrays, made once (scipy makes a new matrix object
-        and checks its arrays on every ``.T``: 75 us, two mat-vecs of a 500-node beam, twice a step)."""
+        """(s, n) -- the incidence's transpose, a CSC view of its arrays, made once: scipy makes a new matrix object
+        and checks its arrays on every ``.T``, 10 us of a 32 us gather on the 936-node README beam, twice a step."""
         return self.incidence.T
 
     def _gathered(self, x: np.ndarray) -> np.ndarray:

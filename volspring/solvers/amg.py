@@ -92,9 +92,9 @@ def _coarse_solve(hierarchy):
     """b -> the coarsest level's solution, by the hierarchy's factorised coarse solver.
 
     pyamg's sparse LU solver keeps the factors of the coarsest matrix without its empty columns and, on every call,
-    selects and scatters b through a sparse selection matrix and its transpose (three sparse objects a call: 75 us, a
-    few mat-vecs of a 1k-node system, once per V-cycle). Here the same rows are picked and put back by index, the
-    same numbers bit for bit (the selection's entries are ones). Any other coarse solver is called as it is."""
+    selects and scatters b through a sparse selection matrix and its transpose. Here the same rows are picked and put
+    back by index, the same numbers bit for bit (the selection's entries are ones): 52 -> 30 us a V-cycle on the
+    936-node README beam, whose mat-vec takes 59 us. Any other coarse solver is called as it is."""
     solver, coarsest = hierarchy.coarse_solver, hierarchy.levels[-1].A
     factors, selection = getattr(solver, "LU", None), getattr(solver, "LU_Map", None)
     if factors is None or selection is None:
