@@ -778,8 +778,9 @@ class AMGConjugateGradient(_LinearSolver):
 def _sum_duplicates(matrix) -> None:
     """Sort a CSR or BSR matrix's column (block) indices and add up duplicate entries (blocks), in place.
 
-    scipy's CSR form does this in C, its BSR form in a Python loop over every block: 14 mat-vecs a build at 10k
-    nodes, where a Galerkin product's sorted coarse matrix (no duplicates, but scipy cannot know) was checked.
+    scipy's CSR form does this in C, its BSR form in a Python loop over every block, which ran on every sorted
+    Galerkin product (no duplicates, but scipy cannot know): a build at 10k nodes took 180 mat-vecs with it and 162
+    with this (alternating in one process).
     Here the BSR duplicates are found and summed with array operations, in the same order (the same bits); a loop
     runs once per duplicate of a block, not per block."""
     if matrix.format != "bsr" or matrix.has_canonical_format:
