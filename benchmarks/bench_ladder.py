@@ -1,7 +1,7 @@
 """Cost of each rung of the model ladder: its implicit step against the springs' step, from one run.
 
-A beam (1 m x 0.2 m x 0.2 m, pinned at x = 0, under gravity, E = 1e7 Pa, nu = 0.45, dt = 0.01 s, the
-README's scene) is built on every rung of :data:`volspring.ladder.MODELS` on the same mesh. Each
+A beam (1 m x 0.2 m x 0.2 m, pinned at x = 0, under gravity, E = 1e7 Pa, nu = 0.45 (``--nu``), dt = 0.01 s,
+the README's scene) is built on every rung of :data:`volspring.ladder.MODELS` on the same mesh. Each
 rung takes ``--steps`` implicit steps (AMG-preconditioned CG, ``ImplicitEuler()`` defaults) after
 two warm-up steps (the hierarchy build); the script prints per rung the median wall time per step,
 its ratio to the springs' step, the CG iterations per step, the 3x3 blocks assembled (the continuum
@@ -14,6 +14,7 @@ Run (one thread, as every timing in this project)::
 
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --cells 50 10 10 --steps 10
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --nu 0.499 --steps 30   # nearly incompressible
 
 This is a script, not a test.
 """
@@ -27,12 +28,12 @@ import time
 import numpy as np
 
 
-def build(rung, cells):
+def build(rung, cells, nu=0.45):
     from meshing import structured_box
     from volspring import Gravity, Material, Model, Pins, Scene
 
     mesh = structured_box(tuple(cells), (1.0, 0.2, 0.2))
-    model = Model.from_mesh(mesh, Material(E=1e7, nu=0.45, density=1000.0), model=rung)
+    model = Model.from_mesh(mesh, Material(E=1e7, nu=nu, density=1000.0), model=rung)
     return Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
 
 
@@ -78,9 +79,11 @@ def main():
     parser.add_argument("--steps", type=int, default=5)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--dt", type=float, default=0.01)
+    parser.add_argument("--nu", type=float, default=0.45, help="Poisson ratio (the springs ignore it)")
     args = parser.parse_args()
-    scenes = {rung: build(rung, args.cells) for rung in MODELS}
-    print(f"beam {tuple(args.cells)} cells, {scenes['springs'].model.node_count} nodes, dt = {args.dt} s")
+    scenes = {rung: build(rung, args.cells, args.nu) for rung in MODELS}
+    print(f"beam {tuple(args.cells)} cells, {scenes['springs'].model.node_count} nodes, nu = {args.nu}, "
+          f"dt = {args.dt} s")
     step_times = {rung: [] for rung in MODELS}
     iterations, matvec = {}, {}
     for _ in range(args.rounds):
