@@ -101,14 +101,20 @@ if TYPE_CHECKING:
     from meshing.mesh import TetMesh
     from volspring.elements.springs import Springs
 
-__all__ = ["DEFAULT_ALPHA", "MODELS", "TetMaterials", "network_moduli", "network_poisson_ratio", "smoothed_elements",
-           "volume_rung_moduli"]
+__all__ = ["DEFAULT_ALPHA", "MODELS", "STAND_IN_BULK_CAP", "TetMaterials", "network_moduli", "network_poisson_ratio",
+           "smoothed_elements", "stand_in_bulk", "volume_rung_moduli"]
 
 MODELS = ("springs", "springs+volume", "smoothed")
 #: Weight of the nodal (smoothed) shear in the smoothed rung: the minimax of benchmarks/study_alpha.py over the
 #: held-out shapes at nu 0.25-0.49 (worst deflection error vs Taylor-Hood: 4.5% at 0.65; 7.8% at 0.6 and 9.8% at
 #: 0.7, volume domains given to the free nodes by the scene).
 DEFAULT_ALPHA = 0.65
+#: The volume terms' preconditioner stand-in takes min(kappa, this x mu) per tet (NodalStrain's ``stand_in_bulk``):
+#: the per-tet stand-in locks where kappa >> mu, and capping it cut the CG iterations of 20 steps from rest on the
+#: 3,321-node README beam at nu 0.499 by 14% (smoothed) and 12% (volume rung), at nu 0.49 by 8% and 7%; no change
+#: up to nu 0.45 (kappa below the cap; see NodalStrain.preconditioner_blocks). ``benchmarks/bench_ladder.py --nu
+#: 0.499`` prints the steps.
+STAND_IN_BULK_CAP = 10.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -355,7 +361,12 @@ def smoothed_elements(mesh: TetMesh, tet_materials: TetMaterials, *, alpha: floa
     return (CorotatedTets(mesh.points, mesh.tets, (1.0 - alpha) * mu, stiffness_damping=stiffness_damping),
             NodalStrain(mesh.points, mesh.tets, alpha * mu, 0.0, regions=regions, stiffness_damping=stiffness_damping),
             NodalStrain(mesh.points, mesh.tets, 0.0, lam, regions=regions, clusters="pairs",
-                        stiffness_damping=stiffness_damping))
+                        stiffness_damping=stiffness_damping, stand_in_bulk=stand_in_bulk(lam, mu)))
+
+
+def stand_in_bulk(kappa: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """(T,) -- the volume term's preconditioner stand-in coefficient per tet: min(kappa, STAND_IN_BULK_CAP mu)."""
+    return np.minimum(kappa, STAND_IN_BULK_CAP * mu)
 
 
 def volume_rung_moduli(mesh: TetMesh, tet_materials: TetMaterials, unit_springs: Springs) -> tuple:

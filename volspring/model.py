@@ -290,7 +290,8 @@ class Model:
             moduli, kappa = ladder.volume_rung_moduli(mesh, tet_materials, unit)
             masses, spring_set = springs_from_topology(topology, material, rule=rule, damping_ratio=damping_ratio,
                                                        damping=damping, tet_moduli=moduli, tet_densities=densities)
-            elements = (spring_set, NodalStrain(topology.points, mesh.tets, 0.0, kappa, regions=tet_materials.regions))
+            elements = (spring_set, NodalStrain(topology.points, mesh.tets, 0.0, kappa, regions=tet_materials.regions,
+                                                stand_in_bulk=ladder.stand_in_bulk(kappa, tet_materials.shear_modulus)))
         else:
             if topology.shell_node_count:
                 raise ValueError("model='smoothed' takes a tet mesh without shells (shells are springs); "

@@ -25,7 +25,8 @@ The file is a compressed ``.npz`` (numpy, read without pickle), by convention na
     (:mod:`volspring.elements.continuum`), what their constructor takes, the rest positions being
     the model's first ``node_count``: ``node_count`` () int64, ``tets`` (T, 4) int64,
     ``stiffness_damping`` () float64 [s], and per tet ``shear`` (T,) float64 [Pa]; a nodal strain
-    set also ``bulk`` (T,) float64 [Pa] and ``regions`` (T,) int64, and ``clusters`` (n,) int64 when
+    set also ``bulk`` (T,) float64 [Pa], ``stand_in_bulk`` (T,) float64 [Pa] (its preconditioner's volume
+    coefficient; files without it take ``bulk``) and ``regions`` (T,) int64, and ``clusters`` (n,) int64 when
     its domains are clusters of nodes, with ``cluster_rule`` () text ``"pairs"`` when they are node pairs
     that a scene gives to its free nodes, and ``held`` (n,) bool once it has (its per-domain coefficients and smoothing domains are rebuilt
     from these). For angle and dihedral springs (:mod:`volspring.elements.angles`): ``chains`` (e, 3) or
@@ -152,8 +153,10 @@ def _nodal_strain_from_arrays(arrays, path, prefix, rest_positions) -> NodalStra
     if prefix + "clusters" in arrays:
         clusters = take_array(arrays, prefix + "clusters", path, shape=(len(rest),), kind="i")
     held = take_array(arrays, prefix + "held", path, shape=(len(rest),), kind="b") if prefix + "held" in arrays else None
+    # Files before the stand-in's own bulk coefficient have none: the stand-in takes the bulk, as it did then.
+    stand_in = per_tet("stand_in_bulk") if prefix + "stand_in_bulk" in arrays else None
     nodal = NodalStrain(rest, tets, per_tet("shear"), per_tet("bulk"), regions=regions, clusters=clusters, held=held,
-                        stiffness_damping=damping)
+                        stiffness_damping=damping, stand_in_bulk=stand_in)
     if prefix + "cluster_rule" in arrays:  # files before supported pairs have none: the clusters stay as stored
         rule = str(take_array(arrays, prefix + "cluster_rule", path, shape=(), kind="U"))
         if rule != "pairs" or clusters is None:
