@@ -157,6 +157,12 @@ def test_a_model_file_without_a_rung_loads_as_springs(tmp_path):
     path = save_model(tmp_path / "new.vsmodel.npz", _rung_models()["springs"])
     old = rewritten_archive(path, tmp_path / "old.vsmodel.npz", rung=None)  # as written before the ladder
     assert load_model(old).rung == "springs"
+    # A nearly incompressible model written before the stand-in's own bulk: its stand-in takes the bulk, as then.
+    capped = save_model(tmp_path / "capped.vsmodel.npz", _rung_models()["smoothed, nearly incompressible"])
+    volume = load_model(rewritten_archive(capped, tmp_path / "before.vsmodel.npz",
+                                          **{"elements/2/stand_in_bulk": None})).elements[2]
+    assert np.array_equal(volume.stand_in_bulk, volume.per_tet()["bulk"])
+    assert (load_model(capped).elements[2].stand_in_bulk < volume.stand_in_bulk).all()
     smoothed = save_model(tmp_path / "smoothed.vsmodel.npz", _rung_models()["smoothed"])
     bad = rewritten_archive(smoothed, tmp_path / "bad.vsmodel.npz", **{"elements/1/bulk": np.ones(3)})
     with pytest.raises(ValueError, match=r"bad.vsmodel.npz holds an invalid model: bulk must be a number or have shape"):

@@ -577,12 +577,12 @@ class NodalStrain(_TetContinuum):
         cap: the per-tet term locks, so where kappa >> mu it is far stiffer than the nodal term in most volume
         changes. On the smoothed and volume rungs of a 3,321-node beam over 20 steps from rest, CG took 1054 and
         973 iterations at nu 0.499 with kappa_s = kappa, 909 and 855 with kappa_s = 10 mu (897 and 941 on the
-        smoothed rung with 5 and 20 mu), and at nu 0.49 384 and 360 against 353 and 334; at nu 0.45 (kappa 9 mu)
-        kappa_s = kappa was best (13 CG iterations from zero, 15 at 0.2 kappa). By convexity (Fbar is a mean of
-        F_t) the per-tet shear bounds the
-        smoothed one from above, so the stand-in is stiffer in shear; the per-tet volume term is stiffer
-        in the volumetric modes that the nodal term leaves soft (that is what locking is), which only
-        costs CG iterations. It has the springs' sparsity (a sixth of the 2-ring's 3x3 blocks): on a
+        smoothed rung with 5 and 20 mu), and at nu 0.49 384 and 360 against 353 and 334; at nu 0.45 (kappa 9 mu,
+        below the cap) the full kappa is best (below).
+
+        By convexity (Fbar is a mean of F_t) the per-tet shear bounds the smoothed one from above, so the stand-in
+        is stiffer in shear; the per-tet volume term is stiffer in the volumetric modes that the nodal term leaves
+        soft (that is what locking is), which only costs CG iterations. It has the springs' sparsity (a sixth of the 2-ring's 3x3 blocks): on a
         3,321-node beam at nu 0.45, dt 0.01 s, an AMG hierarchy built from it needed 13 CG iterations
         to rtol 1e-3 where one built from the exact 2-ring matrix needed 7, at a quarter of the cost
         per V-cycle (c = 0: 21 iterations, 0.2: 15).
