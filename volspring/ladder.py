@@ -111,10 +111,11 @@ MODELS = ("springs", "springs+volume", "smoothed")
 DEFAULT_ALPHA = 0.65
 #: The volume terms' preconditioner stand-in takes min(kappa, this x mu) per tet (NodalStrain's ``stand_in_bulk``):
 #: the per-tet stand-in locks where kappa >> mu, and capping it cut the CG iterations of 20 steps from rest on the
-#: 3,321-node README beam at nu 0.499 by 14% (smoothed) and 12% (volume rung), at nu 0.49 by 8% and 7%; no change
-#: up to nu 0.45 (kappa below the cap; see NodalStrain.preconditioner_blocks). ``benchmarks/bench_ladder.py --nu
-#: 0.499`` prints the steps.
-STAND_IN_BULK_CAP = 10.0
+#: 3,321-node README beam by 15% (smoothed) and 12% (volume rung) at nu 0.499, 8% at 0.49 and 3-5% at 0.45;
+#: no change up to nu 0.4 (kappa below the cap). A cap of 10 came within 2% of these iterations from nu 0.47 up
+#: but saved nothing at 0.45; one of 3 cost the smoothed rung 2% more at 0.45 (NodalStrain.preconditioner_blocks
+#: has the figures). ``benchmarks/bench_ladder.py --nu 0.499`` prints the steps.
+STAND_IN_BULK_CAP = 5.0
 
 
 @dataclass(frozen=True, eq=False)

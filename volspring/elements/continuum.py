@@ -575,10 +575,10 @@ class NodalStrain(_TetContinuum):
         volume term ``(c kappa_s / 2) V_t (J_t - 1)^2`` (c = :attr:`PRECONDITIONER_BULK`), with the
         domains' mu and the tet's ``stand_in_bulk`` kappa_s (kappa unless capped, see the constructor). Why a
         cap: the per-tet term locks, so where kappa >> mu it is far stiffer than the nodal term in most volume
-        changes. On the smoothed and volume rungs of a 3,321-node beam over 20 steps from rest, CG took 1054 and
-        973 iterations at nu 0.499 with kappa_s = kappa, 909 and 855 with kappa_s = 10 mu (897 and 941 on the
-        smoothed rung with 5 and 20 mu), and at nu 0.49 384 and 360 against 353 and 334; at nu 0.45 (kappa 9 mu,
-        below the cap) the full kappa is best (below).
+        changes. On the smoothed and volume rungs of a 3,321-node beam over 20 steps from rest, CG took with
+        kappa_s = kappa, 10 mu and 5 mu: 1054, 909 and 897 iterations (smoothed) and 973, 855 and 854 (volume rung)
+        at nu 0.499; 384, 353 and 355 and 360, 334 and 331 at nu 0.49; 179, 179 and 173 and 175, 175 and 167 at nu
+        0.45 (kappa 9 and 8 mu); with 3 mu, 177 and 165 there, and with 20 mu 941 on the smoothed rung at nu 0.499.
 
         By convexity (Fbar is a mean of F_t) the per-tet shear bounds the smoothed one from above, so the stand-in
         is stiffer in shear; the per-tet volume term is stiffer in the volumetric modes that the nodal term leaves
