@@ -582,9 +582,9 @@ class NodalStrain(_TetContinuum):
 
         By convexity (Fbar is a mean of F_t) the per-tet shear bounds the smoothed one from above, so the stand-in
         is stiffer in shear; the per-tet volume term is stiffer in the volumetric modes that the nodal term leaves
-        soft (that is what locking is), which only costs CG iterations. It has the springs' sparsity (a sixth of the 2-ring's 3x3 blocks): on a
-        3,321-node beam at nu 0.45, dt 0.01 s, an AMG hierarchy built from it needed 13 CG iterations
-        to rtol 1e-3 where one built from the exact 2-ring matrix needed 7, at a quarter of the cost
+        soft (that is what locking is), which only costs CG iterations. It has the springs' sparsity (a sixth of the
+        2-ring's 3x3 blocks): on a 3,321-node beam at nu 0.45, dt 0.01 s, an AMG hierarchy built from it needed 13
+        CG iterations to rtol 1e-3 where one built from the exact 2-ring matrix needed 7, at a quarter of the cost
         per V-cycle (c = 0: 21 iterations, 0.2: 15).
         """
         x = np.asarray(x, dtype=np.float64)
