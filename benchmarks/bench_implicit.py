@@ -156,6 +156,9 @@ def main(argv=None):
     logging.basicConfig(level=logging.WARNING)
 
     print(f"load average before: {os.getloadavg()}  (cores: {os.cpu_count()})")
+    from volspring import kernels
+
+    print(f"kernels: {kernels.active()} (volspring.kernels; VOLSPRING_KERNELS=numpy or numba chooses)")
     results = {1e-3: [], 1e-6: []}
     counts = []
     for target in args.nodes:

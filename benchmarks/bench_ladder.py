@@ -82,8 +82,10 @@ def main():
     parser.add_argument("--nu", type=float, default=0.45, help="Poisson ratio (the springs ignore it)")
     args = parser.parse_args()
     scenes = {rung: build(rung, args.cells, args.nu) for rung in MODELS}
+    from volspring import kernels
+
     print(f"beam {tuple(args.cells)} cells, {scenes['springs'].model.node_count} nodes, nu = {args.nu}, "
-          f"dt = {args.dt} s")
+          f"dt = {args.dt} s, kernels: {kernels.active()} (VOLSPRING_KERNELS=numpy or numba chooses)")
     step_times = {rung: [] for rung in MODELS}
     iterations, matvec = {}, {}
     for _ in range(args.rounds):

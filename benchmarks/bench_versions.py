@@ -21,6 +21,7 @@ Run::
     python benchmarks/bench_versions.py                      # v0.1.0, 1k and 10k nodes
     python benchmarks/bench_versions.py --ref v0.1.0 --nodes 1000 10000 --steps 20 --rounds 3
     python benchmarks/bench_versions.py --nodes 200000 --steps 3 --rounds 1     # the memory at 200k nodes
+    python benchmarks/bench_versions.py --kernels numpy numba   # with and without the fast extra's kernels
 
 Every child holds numpy/scipy to one thread. This is a script, not a test.
 """
@@ -67,6 +68,14 @@ CHILD = textwrap.dedent('''
         below = np.flatnonzero(system.model.rest_positions[:, 2] == 0)
         scene = Scene(model, forces=[Gravity(model.masses, (0, 0, -100.0)), ContactForce(system)], pins=Pins(below))
         state = scene.initial_state()
+    try:  # the compiled kernels (volspring.kernels, later than 0.1): loaded or compiled here, not in the first step
+        from volspring.kernels import compiled
+    except ImportError:
+        pass
+    else:
+        if compiled() is not None:
+            springs = model.spring_elements
+            springs.linearize(model.rest_positions, stiffness_scale=1.0).dfdx_times(model.rest_positions)
     integrator = ImplicitEuler()
     resident = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # [KiB] with the libraries and the model
     first = []
@@ -129,9 +138,10 @@ def baseline_python(ref: str) -> Path:
     return python
 
 
-def run(python: Path, script: Path, kind: str, cells: str, steps: int) -> dict:
+def run(python: Path, script: Path, kind: str, cells: str, steps: int, kernels: str = "auto") -> dict:
+    environment = {**os.environ, **THREADS, "VOLSPRING_KERNELS": kernels}
     result = subprocess.run([str(python), str(script), kind, cells, str(steps)], capture_output=True, text=True,
-                            env={**os.environ, **THREADS}, cwd=tempfile.gettempdir())
+                            env=environment, cwd=tempfile.gettempdir())
     if result.returncode:
         raise RuntimeError(f"{python} {kind} {cells} failed:\n{result.stderr[-2000:]}")
     return json.loads(result.stdout.strip().splitlines()[-1])
@@ -144,6 +154,9 @@ def main(argv=None) -> None:
     parser.add_argument("--steps", type=int, default=20, help="timed steps per child")
     parser.add_argument("--rounds", type=int, default=3, help="alternating child launches per version")
     parser.add_argument("--contact-cells", default="5,5,5", help="cells of each contact cube")
+    parser.add_argument("--kernels", nargs="+", default=["auto"], choices=["auto", "numba", "numpy"],
+                        help="what our children's hot loops run (volspring.kernels), one row each: "
+                             "--kernels numpy numba compares the two in one run (default auto)")
     args = parser.parse_args(argv)
 
     ours, baseline = Path(sys.executable), baseline_python(args.ref)
@@ -152,28 +165,31 @@ def main(argv=None) -> None:
         script.write_text(CHILD)
         cases = [("beam", _beam_cells(n)) for n in args.nodes] + [("contact", args.contact_cells)]
         print(f"implicit Euler, dt = 0.01 s, median of {args.rounds} alternating runs of {args.steps} steps")
-        print(f"{'scene':>8} {'nodes':>7} {args.ref + ' [ms]':>14} {'ours [ms]':>10} {'ratio':>6}"
+        print(f"{'scene':>8} {'nodes':>7} {'kernels':>7} {args.ref + ' [ms]':>14} {'ours [ms]':>10} {'ratio':>6}"
               f" {args.ref + ' [mv]':>14} {'ours [mv]':>10} {'ratio':>6} {'CG ' + args.ref:>10} {'CG ours':>8}"
               f" {'build ' + args.ref:>13} {'build ours':>11} {'KiB/node ' + args.ref:>16} {'ours':>6}"
               f" {'peak ' + args.ref:>12} {'ours':>6}")
         for kind, cells in cases:
-            measured = {"base": [], "ours": []}
-            for _ in range(args.rounds):
+            measured: dict[str, list[dict]] = {"base": [], **{choice: [] for choice in args.kernels}}
+            for _ in range(args.rounds):  # alternately: the machine's drift hits every version alike
                 measured["base"].append(run(baseline, script, kind, cells, args.steps))
-                measured["ours"].append(run(ours, script, kind, cells, args.steps))
-            base = statistics.median(r["seconds"] for r in measured["base"])
-            mine = statistics.median(r["seconds"] for r in measured["ours"])
-            base_mv = statistics.median(r["seconds"] / r["matvec"] for r in measured["base"])
-            mine_mv = statistics.median(r["seconds"] / r["matvec"] for r in measured["ours"])
+                for choice in args.kernels:
+                    measured[choice].append(run(ours, script, kind, cells, args.steps, choice))
+            seconds = {name: statistics.median(r["seconds"] for r in runs) for name, runs in measured.items()}
+            in_matvecs = {name: statistics.median(r["seconds"] / r["matvec"] for r in runs)
+                          for name, runs in measured.items()}
             build = {name: statistics.median(r["first_extra"] / r["matvec"] for r in runs)
                      for name, runs in measured.items()}
             memory = {name: statistics.median(r["kib_per_node"] for r in runs) for name, runs in measured.items()}
             peak = {name: statistics.median(r["peak_kib_per_node"] for r in runs) for name, runs in measured.items()}
-            print(f"{kind:>8} {measured['ours'][0]['nodes']:>7} {1e3 * base:>14.2f} {1e3 * mine:>10.2f} "
-                  f"{mine / base:>6.2f} {base_mv:>14.1f} {mine_mv:>10.1f} {mine_mv / base_mv:>6.2f} "
-                  f"{measured['base'][0]['iterations']:>10.1f} {measured['ours'][0]['iterations']:>8.1f}"
-                  f" {build['base']:>10.0f} mv {build['ours']:>8.0f} mv {memory['base']:>16.1f} {memory['ours']:>6.1f}"
-                  f" {peak['base']:>12.1f} {peak['ours']:>6.1f}")
+            for choice in args.kernels:
+                print(f"{kind:>8} {measured[choice][0]['nodes']:>7} {choice:>7} {1e3 * seconds['base']:>14.2f} "
+                      f"{1e3 * seconds[choice]:>10.2f} {seconds[choice] / seconds['base']:>6.2f} "
+                      f"{in_matvecs['base']:>14.1f} {in_matvecs[choice]:>10.1f} "
+                      f"{in_matvecs[choice] / in_matvecs['base']:>6.2f} "
+                      f"{measured['base'][0]['iterations']:>10.1f} {measured[choice][0]['iterations']:>8.1f}"
+                      f" {build['base']:>10.0f} mv {build[choice]:>8.0f} mv {memory['base']:>16.1f}"
+                      f" {memory[choice]:>6.1f} {peak['base']:>12.1f} {peak[choice]:>6.1f}")
 
 
 def _beam_cells(nodes: int) -> str:

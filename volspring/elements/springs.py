@@ -26,6 +26,7 @@ import scipy.sparse as sp
 
 from volspring.elements.base import BlockMap, ElementSet, Linearization
 from volspring.errors import SpringCollapsed
+from volspring.kernels import compiled
 from volspring.material import _real_array, _shown
 from meshing.topology import SPRING_KINDS, vector_lengths
 from typing import TYPE_CHECKING
@@ -152,6 +153,10 @@ class Springs(ElementSet):
         clamp_compression : bool
             clamp the transverse term (1 - l0/l) at 0
         """
+        kernels = compiled()
+        if kernels is not None:
+            return self._compiled_linearization(kernels, x, v, float(stiffness_scale), float(damping_scale),
+                                                bool(clamp_compression))
         r, length = self._directions(x)
         forces = self.incidence @ (self._magnitudes(r, length, v)[:, None] * r)
         transverse = 1.0 - self.rest_lengths / length
@@ -165,6 +170,26 @@ class Springs(ElementSet):
         blocks = np.einsum("ij,ik->ijk", r, along[:, None] * r)
         blocks.reshape(-1, 9)[:, ::4] += (stiffness_scale * transverse)[:, None]
         return SpringLinearization(forces, blocks, None, self, r, length, self.stiffness, transverse)
+
+    def _compiled_linearization(self, kernels, x, v, stiffness_scale, damping_scale, clamp_compression):
+        """:meth:`linearize` by the compiled kernel (:mod:`volspring.kernels`): the same numbers, one pass."""
+        n, s = self.node_count, self.spring_count
+        x = _node_array("x", x, n)
+        v = _NO_VELOCITIES if v is None or not self._damped else _node_array("v", v, n)
+        forces, blocks, r = np.empty((n, 3)), np.empty((s, 3, 3)), np.empty((s, 3))
+        length, transverse = np.empty(s), np.empty(s)
+        incidence = self.incidence
+        if kernels.spring_linearization(x, v, self.pairs, self.stiffness, self.damping, self.rest_lengths,
+                                        stiffness_scale, damping_scale, clamp_compression, incidence.indptr,
+                                        incidence.indices, incidence.data, forces, blocks, r, length, transverse):
+            e = int(np.argmin(length))  # the spring numpy's check names (_directions)
+            raise SpringCollapsed(e, *self.pairs[e])
+        return SpringLinearization(forces, blocks, None, self, r, length, self.stiffness, transverse)
+
+    @cached_property
+    def _damped(self) -> bool:
+        """Whether any damper has a coefficient: without one, velocities change no force."""
+        return bool(self.damping.any())
 
     def renumbered(self, node_rank: np.ndarray, node_count: int | None = None) -> tuple:
         """The same springs in another node numbering, sorted by their first node there.
@@ -238,7 +263,7 @@ class Springs(ElementSet):
     def _magnitudes(self, r, length, v):
         """(s,) float -- spring plus damper force along r on each spring's node i [N]."""
         magnitude = self.stiffness * (length - self.rest_lengths)
-        if v is not None and self.damping.any():
+        if v is not None and self._damped:
             # the stretch rate (v_j - v_i) . r, as -(v_i - v_j) . r
             magnitude -= self.damping * np.einsum("ij,ij->i", self._gathered(v), r)
         return magnitude
@@ -278,6 +303,14 @@ class SpringLinearization(Linearization):
         """(n, 3) float -- dF/dx @ u [N]: H_e (u_j - u_i) = (k - k_t) r (r . du) + k_t du, added
         to node i and subtracted from node j."""
         springs = self.element_set
+        kernels = compiled()
+        if kernels is not None:
+            out = np.empty((springs.node_count, 3))
+            incidence = springs.incidence
+            kernels.spring_stiffness_times(_node_array("u", u, springs.node_count), springs.pairs, self.directions,
+                                           self.axial, self.transverse, incidence.indptr, incidence.indices,
+                                           incidence.data, out)
+            return out
         du = springs._gathered(u)  # u_i - u_j: the signs below make H_e (u_j - u_i) of it exactly
         along = np.einsum("ij,ij->i", self.directions, du)
         along *= self.transverse - self.axial
@@ -287,6 +320,19 @@ class SpringLinearization(Linearization):
 
 
 # ---------------------------------------------------------------------------- input checks
+_NO_VELOCITIES = np.zeros((0, 3))  # what the compiled kernel takes for "no velocities"
+_NO_VELOCITIES.setflags(write=False)
+
+
+def _node_array(name, value, node_count) -> np.ndarray:
+    """(n, 3) C-contiguous float64 -- positions or velocities for the compiled kernel, whose indexing is not bounds-
+    checked: the wrong shape is refused here (numpy's sparse product refuses it on the other path)."""
+    array = np.ascontiguousarray(value, dtype=np.float64)
+    if array.shape != (node_count, 3):
+        raise ValueError(f"{name} has shape {array.shape}; expected ({node_count}, 3), one row per node")
+    return array
+
+
 def _immutable(value, dtype, shape) -> bool:
     """Whether ``value`` is a C-contiguous ``dtype`` array of ``shape`` that nothing can write to: read-only, and so is
     every array it views (a read-only view of a writeable array is not)."""

@@ -1,0 +1,194 @@
+"""The compiled kernels (volspring.kernels, the fast extra): numpy's results bit for bit, and the choice between them.
+
+The tests marked ``fast`` need numba (skipped without it; .ci/run installs the extra and runs them). Every comparison
+is exact (``np.array_equal`` on the bits): the kernels promise the same floating-point operations in the same order,
+so no tolerance applies.
+"""
+
+import importlib.util
+import sys
+
+import numpy as np
+import pytest
+
+from meshing import structured_box
+from volspring import Gravity, Material, Model, Pins, Scene, kernels
+from volspring.assembly import BlockPattern
+from volspring.errors import SpringCollapsed
+from volspring.integrators.implicit import ImplicitEuler
+
+HAS_NUMBA = importlib.util.find_spec("numba") is not None
+
+
+def needs_numba(test):
+    """Marked ``fast`` (.ci/run runs them with the extra installed), skipped without numba."""
+    skip = pytest.mark.skipif(not HAS_NUMBA, reason="needs the fast extra: pip install -e '.[fast]'")
+    return pytest.mark.fast(skip(test))
+
+
+@pytest.fixture(autouse=True)
+def restored_choice(monkeypatch):
+    """Each test chooses for itself; the process's choice is put back after it."""
+    monkeypatch.setattr(kernels, "_choice", kernels._choice)
+    monkeypatch.delenv(kernels.ENVIRONMENT_VARIABLE, raising=False)
+
+
+def bits(array):
+    return np.ascontiguousarray(array).view(np.uint64)
+
+
+def assert_same_bits(a, b):
+    assert a.shape == b.shape
+    assert np.array_equal(bits(a), bits(b)), f"{np.count_nonzero(bits(a) != bits(b))} entries differ"
+
+
+def under_both(function):
+    """``function()`` with numpy, then with the kernels."""
+    kernels.select("numpy")
+    reference = function()
+    kernels.select("numba")
+    return reference, function()
+
+
+# ---------------------------------------------------------------------------- the choice
+def test_a_choice_outside_the_three_is_refused_by_name():
+    with pytest.raises(ValueError, match=r"kernels = 'cuda'; expected one of 'auto', 'numba', 'numpy'"):
+        kernels.select("cuda")
+
+
+def test_the_environment_variable_is_read_and_checked(monkeypatch):
+    monkeypatch.setattr(kernels, "_choice", None)
+    monkeypatch.setenv(kernels.ENVIRONMENT_VARIABLE, "NumPy ")
+    assert kernels.active() == "numpy"
+    monkeypatch.setattr(kernels, "_choice", None)
+    monkeypatch.setenv(kernels.ENVIRONMENT_VARIABLE, "fortran")
+    with pytest.raises(ValueError, match=r"VOLSPRING_KERNELS = 'fortran'; expected one of"):
+        kernels.active()
+
+
+def test_numpy_runs_when_chosen_and_auto_runs_numba_when_it_imports():
+    assert kernels.select("numpy") == "numpy"
+    assert kernels.compiled() is None
+    assert kernels.select("auto") == ("numba" if HAS_NUMBA else "numpy")
+
+
+def test_without_numba_auto_falls_back_and_numba_is_refused_with_the_extra_named(monkeypatch):
+    # numba made unimportable (sys.modules entries of None raise ImportError on import), whether it is installed or not
+    monkeypatch.setitem(sys.modules, "numba", None)
+    monkeypatch.delitem(sys.modules, "volspring._compiled", raising=False)
+    monkeypatch.setattr(kernels, "_module", None)
+    monkeypatch.setattr(kernels, "_missing", None)
+    assert kernels.select("auto") == "numpy"
+    with pytest.raises(ImportError, match=r"numba does not import .*pip install 'volspring\[fast\]'"):
+        kernels.select("numba")
+    # and the model still steps, in numpy
+    scene = beam_scene((6, 2, 2))
+    state = ImplicitEuler().step(scene, scene.initial_state(), 0.01)
+    assert np.isfinite(state.x).all() and state.x[:, 2].min() < 0.0
+
+
+# ---------------------------------------------------------------------------- the kernels against numpy
+def beam_scene(cells, *, model="springs", damping_ratio=None):
+    mesh = structured_box(cells, (1.0, 0.2, 0.2))
+    body = Model.from_mesh(mesh, Material(1e7, 0.45, 1000.0), model=model, damping_ratio=damping_ratio)
+    return Scene(body, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+
+
+def disturbed(model, scale, seed):
+    """Positions and velocities off the rest shape: some springs stretched, some compressed (both block branches)."""
+    rng = np.random.default_rng(seed)
+    x = model.rest_positions + scale * rng.standard_normal(model.rest_positions.shape)
+    return x, rng.standard_normal(x.shape)
+
+
+@needs_numba
+@pytest.mark.parametrize("with_velocities", [False, True])
+@pytest.mark.parametrize("clamp", [True, False])
+@pytest.mark.parametrize("scales", [(1.0, 0.0), (1e-4, 1e-2)])
+def test_spring_forces_blocks_and_products_are_numpys_bit_for_bit(with_velocities, clamp, scales):
+    model = beam_scene((8, 3, 3), damping_ratio=0.05).model
+    springs = model.spring_elements
+    assert springs.damping.any()  # the dampers' terms are in the comparison
+    x, v = disturbed(model, 0.01, seed=1)
+    stiffness_scale, damping_scale = scales
+
+    def linearized():
+        lin = springs.linearize(x, v if with_velocities else None, stiffness_scale=stiffness_scale,
+                                damping_scale=damping_scale, clamp_compression=clamp)
+        return lin, lin.dfdx_times(v)
+
+    (numpy_lin, numpy_product), (kernel_lin, kernel_product) = under_both(linearized)
+    transverse = 1.0 - springs.rest_lengths / numpy_lin.lengths
+    assert (transverse < 0).any() and (transverse > 0).any()  # compressed and stretched springs both
+    for name in ("forces", "blocks", "directions", "lengths", "transverse"):
+        assert_same_bits(getattr(numpy_lin, name), getattr(kernel_lin, name))
+    assert_same_bits(numpy_product, kernel_product)
+
+
+@needs_numba
+def test_forces_vanish_exactly_at_the_rest_shape():
+    """The kernel's lengths are the rest lengths' own sums (meshing.topology.vector_lengths), so nothing moves a
+    body at rest: a different order of the three squares would leave forces of the order of round-off."""
+    model = beam_scene((10, 3, 3)).model
+    kernels.select("numba")
+    forces = model.spring_elements.linearize(model.rest_positions, stiffness_scale=1.0).forces
+    assert not forces.any()
+
+
+@needs_numba
+def test_a_collapsed_spring_is_named_as_numpy_names_it():
+    model = beam_scene((4, 2, 2)).model
+    springs = model.spring_elements
+    x = model.rest_positions.copy()
+    i, j = springs.pairs[7]
+    x[j] = x[i]
+
+    def collapse():
+        with pytest.raises(SpringCollapsed) as caught:
+            springs.linearize(x, stiffness_scale=1.0)
+        return str(caught.value)
+
+    numpy_message, kernel_message = under_both(collapse)
+    assert kernel_message == numpy_message and "7" in kernel_message
+
+
+@needs_numba
+def test_positions_of_the_wrong_shape_are_refused_before_the_kernel_reads_them():
+    # the compiled loops do not check their indices: a short array would be read past its end
+    springs = beam_scene((4, 2, 2)).model.spring_elements
+    kernels.select("numba")
+    with pytest.raises(ValueError, match=r"x has shape \(10, 3\); expected \(45, 3\)"):
+        springs.linearize(np.zeros((10, 3)), stiffness_scale=1.0)
+
+
+@needs_numba
+@pytest.mark.parametrize("rung", ["springs", "springs+volume"])
+def test_a_run_is_the_same_bit_for_bit_with_and_without_the_kernels(rung):
+    """30 implicit steps of a 4,500-node beam under gravity, with dampers (damped springs, stiffness damping of the
+    volume term), its AMG hierarchy built and kept as in any run: positions and velocities the same bits."""
+    scene = beam_scene((44, 9, 9), model=rung, damping_ratio=0.02)
+    assert scene.model.node_count == 4500
+
+    def run():
+        integrator, state = ImplicitEuler(), scene.initial_state()
+        for _ in range(30):
+            state = integrator.step(scene, state, 0.01)
+        return state
+
+    numpy_state, kernel_state = under_both(run)
+    assert numpy_state.x[:, 2].min() < -1e-3  # the beam sagged: the comparison is of a real motion
+    assert_same_bits(numpy_state.x, kernel_state.x)
+    assert_same_bits(numpy_state.v, kernel_state.v)
+
+
+@needs_numba
+def test_the_matrix_is_the_same_bit_for_bit():
+    scene = beam_scene((12, 4, 4), damping_ratio=0.05)
+    pattern = BlockPattern(scene.model, scene.free)
+    x, v = disturbed(scene.model, 0.005, seed=3)
+
+    def data():
+        return pattern.data(pattern.linearize(x, v, stiffness_scale=1e-4, damping_scale=1e-2),
+                            scene.model.masses[pattern.free_nodes])
+
+    assert_same_bits(*under_both(data))

@@ -1,0 +1,97 @@
+"""The numba kernels behind :mod:`volspring.kernels` (imported only when numba is installed).
+
+Each kernel is one compiled pass that does what a few numpy passes do elsewhere, with the same
+floating-point operations in the same order, so that its results are bit for bit numpy's (the
+tests marked ``fast`` compare them). numba's ``error_model="numpy"`` makes a division by zero give
+inf or NaN as numpy does instead of raising; the callers check for it as they do after numpy.
+Compiled code is cached on disk (numba's ``cache=True``): a process pays the compilation once per
+machine and installed version, not once per run.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["spring_linearization", "spring_stiffness_times"]
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+
+@_jit
+def spring_linearization(x, v, pairs, stiffness, damping, rest_lengths, stiffness_scale, damping_scale, clamp,
+                         incidence_indptr, incidence_indices, incidence_data, forces, blocks, directions, lengths,
+                         transverse):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """Forces and blocks of :meth:`volspring.elements.Springs.linearize` in one pass over the springs.
+
+    ``v`` with no rows means no velocities (the dampers exert no force); ``damping_scale`` 0 leaves the dampers
+    out of the blocks. Writes ``forces`` (n, 3), ``blocks`` (s, 3, 3), ``directions`` (s, 3), ``lengths`` and
+    ``transverse`` (s,), as the numpy code computes them, and returns how many springs have no positive length
+    (whose outputs are then inf or NaN, as numpy's would be).
+    """
+    s = pairs.shape[0]
+    along_forces = np.empty((s, 3))
+    collapsed = 0
+    damped = v.shape[0] > 0
+    for e in range(s):
+        i, j = pairs[e, 0], pairs[e, 1]
+        d0, d1, d2 = x[i, 0] - x[j, 0], x[i, 1] - x[j, 1], x[i, 2] - x[j, 2]
+        # meshing.topology.vector_lengths: numpy's einsum sums the three squares as (0 + 2) + 1
+        length = np.sqrt((d0 * d0 + d2 * d2) + d1 * d1)
+        if not length > 0.0:
+            collapsed += 1
+        lengths[e] = length
+        minus_length = -length
+        r0, r1, r2 = d0 / minus_length, d1 / minus_length, d2 / minus_length
+        directions[e, 0], directions[e, 1], directions[e, 2] = r0, r1, r2
+        magnitude = stiffness[e] * (length - rest_lengths[e])
+        if damped:
+            w0, w1, w2 = v[i, 0] - v[j, 0], v[i, 1] - v[j, 1], v[i, 2] - v[j, 2]
+            magnitude -= damping[e] * ((w0 * r0 + w2 * r2) + w1 * r1)
+        along_forces[e, 0], along_forces[e, 1], along_forces[e, 2] = magnitude * r0, magnitude * r1, magnitude * r2
+        t = 1.0 - rest_lengths[e] / length
+        if clamp and t < 0.0:
+            t = 0.0
+        t *= stiffness[e]
+        transverse[e] = t
+        along = stiffness_scale * (stiffness[e] - t)
+        if damping_scale != 0.0:
+            along += damping_scale * damping[e]
+        a0, a1, a2 = along * r0, along * r1, along * r2
+        diagonal = stiffness_scale * t
+        blocks[e, 0, 0], blocks[e, 0, 1], blocks[e, 0, 2] = r0 * a0 + diagonal, r0 * a1, r0 * a2
+        blocks[e, 1, 0], blocks[e, 1, 1], blocks[e, 1, 2] = r1 * a0, r1 * a1 + diagonal, r1 * a2
+        blocks[e, 2, 0], blocks[e, 2, 1], blocks[e, 2, 2] = r2 * a0, r2 * a1, r2 * a2 + diagonal
+    _scatter(incidence_indptr, incidence_indices, incidence_data, along_forces, forces)
+    return collapsed
+
+
+@_jit
+def spring_stiffness_times(u, pairs, directions, axial, transverse, incidence_indptr, incidence_indices,
+                           incidence_data, out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """:meth:`volspring.elements.springs.SpringLinearization.dfdx_times` in one pass: writes dF/dx @ u to ``out``."""
+    s = pairs.shape[0]
+    spring_forces = np.empty((s, 3))
+    for e in range(s):
+        i, j = pairs[e, 0], pairs[e, 1]
+        d0, d1, d2 = u[i, 0] - u[j, 0], u[i, 1] - u[j, 1], u[i, 2] - u[j, 2]
+        r0, r1, r2 = directions[e, 0], directions[e, 1], directions[e, 2]
+        t = transverse[e]
+        along = ((r0 * d0 + r2 * d2) + r1 * d1) * (t - axial[e])
+        spring_forces[e, 0] = d0 * -t + along * r0
+        spring_forces[e, 1] = d1 * -t + along * r1
+        spring_forces[e, 2] = d2 * -t + along * r2
+    _scatter(incidence_indptr, incidence_indices, incidence_data, spring_forces, out)
+
+
+@_jit
+def _scatter(indptr, indices, data, spring_vectors, out):  # pragma: no cover (compiled)
+    """``out = incidence @ spring_vectors`` in the order of scipy's CSR product (each row from zero, entry by entry)."""
+    for node in range(indptr.shape[0] - 1):
+        f0 = f1 = f2 = 0.0
+        for entry in range(indptr[node], indptr[node + 1]):
+            spring, sign = indices[entry], data[entry]
+            f0 += sign * spring_vectors[spring, 0]
+            f1 += sign * spring_vectors[spring, 1]
+            f2 += sign * spring_vectors[spring, 2]
+        out[node, 0], out[node, 1], out[node, 2] = f0, f1, f2

@@ -1,0 +1,107 @@
+"""Compiled kernels for the implicit step's hot loops: optional, and never a change of result.
+
+The implicit step spends a quarter of its time outside the linear solve, in the springs' forces and
+Jacobian blocks and in the refill of the block matrix. numpy does each as several passes over
+arrays of the springs' size (gathers, lengths, outer products, scatters), each with its own
+temporary. With numba installed (``pip install 'volspring[fast]'``) the same arithmetic runs in one
+compiled pass per loop (:mod:`volspring._compiled`).
+
+The compiled kernels give the numpy code's results bit for bit: every sum is taken in the order
+numpy and scipy take it (a spring's length as numpy's ``einsum`` sums its three squares, a node's
+force and a matrix block in the order of the scatter matrices' rows), so a run is the same with
+or without numba, and a checkpoint written by one resumes in the other. The tests marked ``fast``
+check this on every kernel and on whole runs.
+
+Which code runs:
+
+- ``auto`` (the default): the kernels when numba imports, numpy otherwise;
+- ``numba``: the kernels, and an error if numba is missing;
+- ``numpy``: numpy only.
+
+Set it with the environment variable ``VOLSPRING_KERNELS`` (read at the first step) or with
+:func:`select` (``select("numpy")`` to time the two against each other in one process). The first
+step of a process compiles the kernels (about 2 s) unless numba's on-disk cache has them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+from types import ModuleType
+
+__all__ = ["CHOICES", "active", "select"]
+
+CHOICES = ("auto", "numba", "numpy")
+ENVIRONMENT_VARIABLE = "VOLSPRING_KERNELS"
+
+_choice: str | None = None  # None: not chosen yet (the environment variable, else auto, at first use)
+_module: ModuleType | None = None  # the compiled kernels, once imported
+_missing: str | None = None  # why numba did not import, once tried (not tried again on every step)
+
+
+def select(choice: str) -> str:
+    """Choose which code the hot loops run (see the module docstring).
+
+    Parameters
+    ----------
+    choice : str
+        ``"auto"``, ``"numba"`` or ``"numpy"``
+
+    Returns
+    -------
+    str
+        what runs from now on: ``"numba"`` or ``"numpy"``
+
+    Raises
+    ------
+    ValueError
+        for another choice
+    ImportError
+        for ``"numba"`` when numba does not import
+    """
+    global _choice
+    if choice not in CHOICES:
+        raise ValueError(f"kernels = {choice!r}; expected one of {', '.join(map(repr, CHOICES))}")
+    if choice == "numba":
+        _load(required=True)
+    _choice = choice
+    return active()
+
+
+def active() -> str:
+    """``"numba"`` or ``"numpy"``: what the hot loops run now."""
+    return "numpy" if compiled() is None else "numba"
+
+
+def compiled() -> ModuleType | None:
+    """The compiled kernels (:mod:`volspring._compiled`) when they are to run, else None."""
+    global _choice
+    if _choice is None:
+        requested = os.environ.get(ENVIRONMENT_VARIABLE, "auto").strip().lower() or "auto"
+        if requested not in CHOICES:
+            raise ValueError(f"{ENVIRONMENT_VARIABLE} = {requested!r}; expected one of "
+                             f"{', '.join(map(repr, CHOICES))}")
+        if requested == "numba":
+            _load(required=True)
+        _choice = requested
+    if _choice == "numpy":
+        return None
+    return _load(required=_choice == "numba")
+
+
+def _load(*, required: bool) -> ModuleType | None:
+    global _module, _missing
+    if _module is None and _missing is None:
+        try:
+            compiled_kernels = importlib.import_module("volspring._compiled")
+        except ImportError as error:
+            if error.name != "numba" and not (error.name or "").startswith(("numba.", "llvmlite")):
+                raise  # something of ours, not a missing extra
+            _missing = str(error)
+        else:
+            _module = compiled_kernels
+    if _module is None and required:
+        raise ImportError(f"the numba kernels were asked for ({ENVIRONMENT_VARIABLE} or volspring.kernels.select) "
+                          f"but numba does not import ({_missing}); install the fast extra: "
+                          "pip install 'volspring[fast]'")
+    return _module
