@@ -161,11 +161,49 @@ def test_positions_of_the_wrong_shape_are_refused_before_the_kernel_reads_them()
         springs.linearize(np.zeros((10, 3)), stiffness_scale=1.0)
 
 
+def symmetric_batch(seed):
+    """Symmetric 3x3 matrices of every kind the Jacobi rotations meet: F^T F of strains small and large (some need
+    more than the four sweeps, which makes the whole batch sweep on), diagonal ones (nothing to rotate), repeated
+    eigenvalues, zero, and one with a NaN on its diagonal (never converges)."""
+    rng = np.random.default_rng(seed)
+    F = np.eye(3) + np.concatenate([0.1 * rng.standard_normal((3000, 3, 3)), 3.0 * rng.standard_normal((50, 3, 3))])
+    C = np.matmul(np.swapaxes(F, 1, 2), F)
+    C[:10] = np.eye(3) * rng.uniform(0.5, 2.0, (10, 1, 1))
+    C[10] = np.diag([2.0, 2.0, 1.0])
+    C[11] = 0.0
+    C[12, 0, 0] = np.nan
+    return C
+
+
 @needs_numba
-@pytest.mark.parametrize("rung", ["springs", "springs+volume"])
+def test_the_jacobi_eigensolver_is_numpys_bit_for_bit():
+    from volspring.elements.tet_kinematics import _jacobi_eigh
+
+    C = symmetric_batch(seed=4)
+    numpy_result, kernel_result = under_both(lambda: _jacobi_eigh(C.copy()))
+    assert not numpy_result[2][12] and numpy_result[2][:12].all()  # the NaN matrix alone did not converge
+    for reference, result in zip(numpy_result, kernel_result):
+        assert result.dtype == reference.dtype and result.flags.c_contiguous
+        assert_same_bits(reference.astype(np.float64), result.astype(np.float64))
+
+
+@needs_numba
+def test_the_corotation_is_numpys_bit_for_bit_inverted_tets_included():
+    from volspring.elements.tet_kinematics import corotated
+
+    rng = np.random.default_rng(5)
+    F = np.eye(3) + 0.2 * rng.standard_normal((2000, 3, 3))
+    F[:20, :, 2] *= -1.0  # inverted: LAPACK's path for these, the Jacobi path for the rest
+    numpy_result, kernel_result = under_both(lambda: corotated(F))
+    for reference, result in zip(numpy_result, kernel_result):
+        assert_same_bits(reference, result)
+
+
+@needs_numba
+@pytest.mark.parametrize("rung", ["springs", "springs+volume", "smoothed"])
 def test_a_run_is_the_same_bit_for_bit_with_and_without_the_kernels(rung):
     """30 implicit steps of a 4,500-node beam under gravity, with dampers (damped springs, stiffness damping of the
-    volume term), its AMG hierarchy built and kept as in any run: positions and velocities the same bits."""
+    continuum terms), its AMG hierarchy built and kept as in any run: positions and velocities the same bits."""
     scene = beam_scene((44, 9, 9), model=rung, damping_ratio=0.02)
     assert scene.model.node_count == 4500
 

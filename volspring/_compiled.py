@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["spring_linearization", "spring_stiffness_times"]
+__all__ = ["jacobi_eigh", "spring_linearization", "spring_stiffness_times"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -95,3 +95,73 @@ def _scatter(indptr, indices, data, spring_vectors, out):  # pragma: no cover (c
             f1 += sign * spring_vectors[spring, 1]
             f2 += sign * spring_vectors[spring, 2]
         out[node, 0], out[node, 1], out[node, 2] = f0, f1, f2
+
+
+@_jit
+def jacobi_eigh(entries, sweeps, max_sweeps, rotations, vectors):  # pragma: no cover (compiled; see the fast tests)
+    """:func:`volspring.elements.tet_kinematics._jacobi_eigh` on (6, m) ``entries`` (the upper triangle's
+    (0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2), changed in place) with the same rotations in the same order.
+
+    As in numpy, every matrix takes ``sweeps`` sweeps and then more, all of them together, until every one has
+    converged or ``max_sweeps`` are done: a matrix's result does not depend on when it alone converged but on the
+    whole batch, exactly as numpy's. Each sweep applies the three rotations (``rotations``, (3, 3) int rows
+    (p, q, r)) one after the other to every matrix (:func:`_rotate`). ``vectors`` (9, m) is set to the eigenvectors
+    by row and column. Returns whether each matrix converged.
+    """
+    m = entries.shape[1]
+    # index into entries of the symmetric pair (i, j)
+    slot = np.array([[0, 1, 2], [1, 3, 4], [2, 4, 5]])
+    scale = np.empty(m)
+    for k in range(m):
+        scale[k] = (np.abs(entries[0, k]) + np.abs(entries[3, k]) + np.abs(entries[5, k])) * 1e-15
+        for i in range(3):
+            for j in range(3):
+                vectors[3 * i + j, k] = 1.0 if i == j else 0.0
+    for sweep in range(max_sweeps):
+        if sweep >= sweeps:
+            done = True
+            for k in range(m):
+                a01, a02, a12 = entries[1, k], entries[2, k], entries[4, k]
+                if not np.sqrt((a01 * a01 + a02 * a02) + a12 * a12) <= scale[k]:
+                    done = False
+                    break
+            if done:
+                break
+        for rotation in range(3):
+            p, q, r = rotations[rotation, 0], rotations[rotation, 1], rotations[rotation, 2]
+            _rotate(entries[slot[p, p]], entries[slot[q, q]], entries[slot[p, q]], entries[slot[r, p]],
+                    entries[slot[r, q]], vectors[p], vectors[q], vectors[3 + p], vectors[3 + q], vectors[6 + p],
+                    vectors[6 + q])
+    converged = np.empty(m, dtype=np.bool_)
+    for k in range(m):
+        a01, a02, a12 = entries[1, k], entries[2, k], entries[4, k]
+        converged[k] = np.sqrt((a01 * a01 + a02 * a02) + a12 * a12) <= scale[k]
+    return converged
+
+
+@_jit
+def _rotate(app, aqq, apq, arp, arq, v0p, v0q, v1p, v1q, v2p, v2q):  # pragma: no cover (compiled)
+    """One Jacobi rotation in the plane (p, q) of every matrix, on the rows of its entries (one loop over the
+    matrices without branches, which the compiler vectorises: divisions and square roots dominate)."""
+    for k in range(app.shape[0]):
+        a = apq[k]
+        tau = (aqq[k] - app[k]) / (2.0 * a)
+        t = np.copysign(1.0, tau) / (np.abs(tau) + np.sqrt(1.0 + tau * tau))
+        t = t if np.isfinite(t) and a != 0.0 else 0.0
+        c = 1.0 / np.sqrt(1.0 + t * t)
+        s = t * c
+        app[k] = app[k] - t * a
+        aqq[k] = aqq[k] + t * a
+        apq[k] = 0.0
+        xp, xq = arp[k], arq[k]
+        arp[k] = c * xp - s * xq
+        arq[k] = s * xp + c * xq
+        xp, xq = v0p[k], v0q[k]
+        v0p[k] = c * xp - s * xq
+        v0q[k] = s * xp + c * xq
+        xp, xq = v1p[k], v1q[k]
+        v1p[k] = c * xp - s * xq
+        v1q[k] = s * xp + c * xq
+        xp, xq = v2p[k], v2q[k]
+        v2p[k] = c * xp - s * xq
+        v2q[k] = s * xp + c * xq

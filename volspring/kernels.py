@@ -1,10 +1,11 @@
 """Compiled kernels for the implicit step's hot loops: optional, and never a change of result.
 
-The implicit step spends a quarter of its time outside the linear solve, in the springs' forces and
-Jacobian blocks and in the refill of the block matrix. numpy does each as several passes over
-arrays of the springs' size (gathers, lengths, outer products, scatters), each with its own
-temporary. With numba installed (``pip install 'volspring[fast]'``) the same arithmetic runs in one
-compiled pass per loop (:mod:`volspring._compiled`).
+The implicit step spends a quarter of its time outside the linear solve, much of it in the springs'
+forces, Jacobian blocks and stiffness product, which numpy does as several passes over arrays of the
+springs' size (gathers, lengths, outer products, scatters), each with its own temporary; the upper
+rungs of the ladder add the polar decomposition of every tet's and node's deformation gradient,
+whose Jacobi rotations numpy does as dozens of vector operations a sweep. With numba installed
+(``pip install 'volspring[fast]'``) the same arithmetic runs in compiled loops (:mod:`volspring._compiled`).
 
 The compiled kernels give the numpy code's results bit for bit: every sum is taken in the order
 numpy and scipy take it (a spring's length as numpy's ``einsum`` sums its three squares, a node's

@@ -26,6 +26,8 @@ from functools import cached_property
 import numpy as np
 from typing import TYPE_CHECKING
 
+from volspring.kernels import compiled
+
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
@@ -116,6 +118,8 @@ _JACOBI_CONDITION = 100.0
 _JACOBI_SWEEPS = 4  # quadratic convergence: 10% random strains reach off-diagonals of 1e-22 in 4 sweeps
 _JACOBI_MAX_SWEEPS = 8
 _JACOBI_ROTATIONS = ((0, 1, 2), (0, 2, 1), (1, 2, 0))
+_ROTATION_TABLE = np.array(_JACOBI_ROTATIONS)  # for the compiled kernel
+_UPPER = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # its order of a symmetric matrix's entries
 
 
 def _symmetric(i, j):
@@ -133,6 +137,13 @@ def _jacobi_eigh(C, sweeps=_JACOBI_SWEEPS):
     """
     a = C if isinstance(C, dict) else {(i, j): C[:, i, j].copy() for i in range(3) for j in range(i, 3)}
     m = len(a[0, 0])
+    kernels = compiled()
+    if kernels is not None:  # the same rotations compiled, one matrix at a time (volspring.kernels)
+        entries = np.array([a[key] for key in _UPPER], dtype=np.float64)
+        vectors = np.empty((9, m))
+        converged = kernels.jacobi_eigh(entries, sweeps, _JACOBI_MAX_SWEEPS, _ROTATION_TABLE, vectors)
+        values = np.ascontiguousarray(entries[[0, 3, 5]].T)
+        return values, np.ascontiguousarray(vectors.T).reshape(m, 3, 3), converged
     V = [[np.full(m, float(i == j)) for j in range(3)] for i in range(3)]  # V[row][column]
     scale = (np.abs(a[0, 0]) + np.abs(a[1, 1]) + np.abs(a[2, 2])) * 1e-15
     for sweep in range(_JACOBI_MAX_SWEEPS):
