@@ -15,6 +15,7 @@ Run (one thread, as every timing in this project)::
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --cells 50 10 10 --steps 10
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --nu 0.499 --steps 30   # nearly incompressible
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --kernels numpy numba --steps 30
 
 This is a script, not a test.
 """
@@ -80,29 +81,44 @@ def main():
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--dt", type=float, default=0.01)
     parser.add_argument("--nu", type=float, default=0.45, help="Poisson ratio (the springs ignore it)")
+    parser.add_argument("--kernels", nargs="+", choices=["auto", "numba", "numpy"], default=["auto"],
+                        help="what the hot loops run (volspring.kernels): one table each, timed alternately in the "
+                             "same rounds; --kernels numpy numba compares them (the numba one needs the fast extra)")
     args = parser.parse_args()
     scenes = {rung: build(rung, args.cells, args.nu) for rung in MODELS}
     from volspring import kernels
 
     print(f"beam {tuple(args.cells)} cells, {scenes['springs'].model.node_count} nodes, nu = {args.nu}, "
-          f"dt = {args.dt} s, kernels: {kernels.active()} (VOLSPRING_KERNELS=numpy or numba chooses)")
-    step_times = {rung: [] for rung in MODELS}
+          f"dt = {args.dt} s")
+    step_times = {(choice, rung): [] for choice in args.kernels for rung in MODELS}
     iterations, matvec = {}, {}
     for _ in range(args.rounds):
+        for choice in args.kernels:
+            kernels.select(choice)
+            for rung, scene in scenes.items():
+                seconds, iterations[choice, rung] = time_steps(scene, args.steps, args.dt)
+                step_times[choice, rung].append(seconds)
+    for choice in args.kernels:
+        kernels.select(choice)
         for rung, scene in scenes.items():
-            seconds, iterations[rung] = time_steps(scene, args.steps, args.dt)
-            step_times[rung].append(seconds)
-    for rung, scene in scenes.items():
-        matvec[rung] = matvec_seconds(scene)
-    base = statistics.median(step_times["springs"])
-    base_mv = matvec["springs"][0]
-    print(f"{'rung':16s} {'ms/step':>9s} {'x springs':>10s} {'CG its':>7s} {'blocks':>9s} {'x springs':>10s} "
-          f"{'mat-vec x':>10s}")
-    for rung in MODELS:
-        seconds = statistics.median(step_times[rung])
-        mv, blocks = matvec[rung]
-        print(f"{rung:16s} {1e3 * seconds:9.1f} {seconds / base:10.2f} {iterations[rung]:7.1f} {blocks:9d} "
-              f"{blocks / matvec['springs'][1]:10.2f} {mv / base_mv:10.2f}")
+            matvec[choice, rung] = matvec_seconds(scene)
+    for choice in args.kernels:
+        kernels.select(choice)
+        base = statistics.median(step_times[choice, "springs"])
+        base_mv = matvec[choice, "springs"][0]
+        print(f"kernels: {kernels.active()} ({choice})")
+        print(f"{'rung':16s} {'ms/step':>9s} {'x springs':>10s} {'CG its':>7s} {'blocks':>9s} {'x springs':>10s} "
+              f"{'mat-vec x':>10s}")
+        for rung in MODELS:
+            seconds = statistics.median(step_times[choice, rung])
+            mv, blocks = matvec[choice, rung]
+            print(f"{rung:16s} {1e3 * seconds:9.1f} {seconds / base:10.2f} {iterations[choice, rung]:7.1f} "
+                  f"{blocks:9d} {blocks / matvec[choice, 'springs'][1]:10.2f} {mv / base_mv:10.2f}")
+    if len(args.kernels) == 2:
+        first, second = args.kernels
+        print(f"step with {second} / with {first}: " + ", ".join(
+            f"{rung} {statistics.median(step_times[second, rung]) / statistics.median(step_times[first, rung]):.2f}"
+            for rung in MODELS))
 
 
 if __name__ == "__main__":

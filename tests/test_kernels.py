@@ -200,6 +200,26 @@ def test_the_corotation_is_numpys_bit_for_bit_inverted_tets_included():
 
 
 @needs_numba
+def test_the_per_tet_shear_product_is_numpys_bit_for_bit():
+    from volspring.elements import CorotatedTets
+
+    model = beam_scene((8, 3, 3), model="smoothed").model
+    tets = next(element_set for element_set in model.elements if isinstance(element_set, CorotatedTets))
+    x, u = disturbed(model, 0.02, seed=6)
+
+    def product():
+        lin = tets.linearize_operator(x, stiffness_scale=1e-4)
+        return lin.scaled_times(u), lin.dfdx_times(u)
+
+    numpy_result, kernel_result = under_both(product)
+    for reference, result in zip(numpy_result, kernel_result):
+        assert_same_bits(reference, result)
+    kernels.select("numba")
+    with pytest.raises(ValueError, match=r"u has 10 rows; expected 144"):
+        tets.linearize_operator(x).scaled_times(np.zeros((10, 3)))
+
+
+@needs_numba
 @pytest.mark.parametrize("rung", ["springs", "springs+volume", "smoothed"])
 def test_a_run_is_the_same_bit_for_bit_with_and_without_the_kernels(rung):
     """30 implicit steps of a 4,500-node beam under gravity, with dampers (damped springs, stiffness damping of the

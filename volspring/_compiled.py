@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["jacobi_eigh", "spring_linearization", "spring_stiffness_times"]
+__all__ = ["corotated_times", "jacobi_eigh", "spring_linearization", "spring_stiffness_times"]
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -165,3 +165,31 @@ def _rotate(app, aqq, apq, arp, arq, v0p, v0q, v1p, v1q, v2p, v2q):  # pragma: n
         xp, xq = v2p[k], v2q[k]
         v2p[k] = c * xp - s * xq
         v2q[k] = s * xp + c * xq
+
+
+@_jit
+def corotated_times(scalar_indptr, scalar_indices, scalar_data, twist_indptr, twist_indices, twist_data, signs, u,
+                    out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """The product of :meth:`volspring.elements.CorotatedTets.linearize_operator`, L u - Q^T (signs * (Q u)), into
+    ``out`` (n, 3), with each of scipy's three sparse products summed in scipy's order, and each twist row of Q
+    read once: its product with u is scattered back while the row is in cache (scipy reads Q twice)."""
+    n = scalar_indptr.shape[0] - 1
+    flat_u = u.reshape(-1)
+    scattered = np.zeros(3 * n)
+    for row in range(twist_indptr.shape[0] - 1):  # Q u (CSR, row by row), then Q^T w (CSC: column by column)
+        total = 0.0
+        for entry in range(twist_indptr[row], twist_indptr[row + 1]):
+            total += twist_data[entry] * flat_u[twist_indices[entry]]
+        weighted = signs[row] * total
+        for entry in range(twist_indptr[row], twist_indptr[row + 1]):
+            scattered[twist_indices[entry]] += twist_data[entry] * weighted
+    for node in range(n):  # L u (CSR with three vectors), less the scattered twist part
+        s0 = s1 = s2 = 0.0
+        for entry in range(scalar_indptr[node], scalar_indptr[node + 1]):
+            a, column = scalar_data[entry], scalar_indices[entry]
+            s0 += a * u[column, 0]
+            s1 += a * u[column, 1]
+            s2 += a * u[column, 2]
+        out[node, 0] = s0 - scattered[3 * node]
+        out[node, 1] = s1 - scattered[3 * node + 1]
+        out[node, 2] = s2 - scattered[3 * node + 2]

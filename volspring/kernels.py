@@ -31,7 +31,9 @@ import importlib
 import os
 from types import ModuleType
 
-__all__ = ["CHOICES", "active", "select"]
+import numpy as np
+
+__all__ = ["CHOICES", "active", "select", "unsigned"]
 
 CHOICES = ("auto", "numba", "numpy")
 ENVIRONMENT_VARIABLE = "VOLSPRING_KERNELS"
@@ -89,6 +91,13 @@ def compiled() -> ModuleType | None:
     if _choice == "numpy":
         return None
     return _load(required=_choice == "numba")
+
+
+def unsigned(indices: np.ndarray) -> np.ndarray:
+    """The same non-negative integer array viewed as unsigned, for a kernel to index with: numba checks every
+    signed index for a negative value to wrap around, which made a gather-and-scatter loop 2.2x slower (1.29
+    against 0.57 ms for the per-tet shear product of the README beam's smoothed rung)."""
+    return indices.view(np.dtype(f"uint{8 * indices.dtype.itemsize}"))
 
 
 def _load(*, required: bool) -> ModuleType | None:

@@ -46,6 +46,7 @@ from volspring.elements.base import BlockMap, ElementSet, Linearization, Operato
 from volspring.elements.tet_kinematics import (SmoothingDomains, TetGradients, corotated, corotational, pair_nodes,
                                               sparse_layout, twist_directions, twist_rows)
 from volspring.material import _real_array, _real_number
+from volspring.kernels import compiled, unsigned
 from typing import TYPE_CHECKING, Self
 
 if TYPE_CHECKING:
@@ -255,8 +256,25 @@ class CorotatedTets(_TetContinuum):
         rows = twist_rows(U, Vt, self.kinematics.gradients)  # (T, r, a, i) = (q_r g_a)_i
         rows *= np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))[:, :, None, None]
         indices, indptr = self._twist_layout
+        signs, L = np.sign(coefficients).ravel(), self._scalar_part
+        kernels = compiled()
+        if kernels is not None:  # the same sums compiled, each twist row read once (volspring.kernels)
+            data, n = rows.reshape(-1), self.node_count
+            scalar_indptr, scalar_indices = unsigned(L.indptr), unsigned(L.indices)
+            twist_indptr, twist_indices = unsigned(indptr), unsigned(indices)
+
+            def compiled_times(u):
+                u = np.ascontiguousarray(u, dtype=np.float64).reshape(-1, 3)
+                if u.shape != (n, 3):  # the kernel does not check its indices
+                    raise ValueError(f"u has {len(u)} rows; expected {n}, one per node")
+                out = np.empty((n, 3))
+                kernels.corotated_times(scalar_indptr, scalar_indices, L.data, twist_indptr, twist_indices, data,
+                                        signs, u, out)
+                return out
+
+            return self._operator(forces, compiled_times, x, stiffness_scale, damping_scale)
         Q = sp.csr_matrix((rows.ravel(), indices, indptr), shape=(len(indptr) - 1, 3 * self.node_count))
-        Qt, signs, L = Q.T, np.sign(coefficients).ravel(), self._scalar_part
+        Qt = Q.T
 
         def times(u):
             u = np.asarray(u, dtype=np.float64).reshape(-1, 3)

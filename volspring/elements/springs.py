@@ -26,7 +26,7 @@ import scipy.sparse as sp
 
 from volspring.elements.base import BlockMap, ElementSet, Linearization
 from volspring.errors import SpringCollapsed
-from volspring.kernels import compiled
+from volspring.kernels import compiled, unsigned
 from volspring.material import _real_array, _shown
 from meshing.topology import SPRING_KINDS, vector_lengths
 from typing import TYPE_CHECKING
@@ -179,9 +179,10 @@ class Springs(ElementSet):
         forces, blocks, r = np.empty((n, 3)), np.empty((s, 3, 3)), np.empty((s, 3))
         length, transverse = np.empty(s), np.empty(s)
         incidence = self.incidence
-        if kernels.spring_linearization(x, v, self.pairs, self.stiffness, self.damping, self.rest_lengths,
-                                        stiffness_scale, damping_scale, clamp_compression, incidence.indptr,
-                                        incidence.indices, incidence.data, forces, blocks, r, length, transverse):
+        if kernels.spring_linearization(x, v, unsigned(self.pairs), self.stiffness, self.damping, self.rest_lengths,
+                                        stiffness_scale, damping_scale, clamp_compression, unsigned(incidence.indptr),
+                                        unsigned(incidence.indices), incidence.data, forces, blocks, r, length,
+                                        transverse):
             e = int(np.argmin(length))  # the spring numpy's check names (_directions)
             raise SpringCollapsed(e, *self.pairs[e])
         return SpringLinearization(forces, blocks, None, self, r, length, self.stiffness, transverse)
@@ -307,9 +308,9 @@ class SpringLinearization(Linearization):
         if kernels is not None:
             out = np.empty((springs.node_count, 3))
             incidence = springs.incidence
-            kernels.spring_stiffness_times(_node_array("u", u, springs.node_count), springs.pairs, self.directions,
-                                           self.axial, self.transverse, incidence.indptr, incidence.indices,
-                                           incidence.data, out)
+            kernels.spring_stiffness_times(_node_array("u", u, springs.node_count), unsigned(springs.pairs),
+                                           self.directions, self.axial, self.transverse, unsigned(incidence.indptr),
+                                           unsigned(incidence.indices), incidence.data, out)
             return out
         du = springs._gathered(u)  # u_i - u_j: the signs below make H_e (u_j - u_i) of it exactly
         along = np.einsum("ij,ij->i", self.directions, du)
