@@ -62,7 +62,7 @@ def spring_linearization(x, v, pairs, stiffness, damping, rest_lengths, stiffnes
         blocks[e, 0, 0], blocks[e, 0, 1], blocks[e, 0, 2] = r0 * a0 + diagonal, r0 * a1, r0 * a2
         blocks[e, 1, 0], blocks[e, 1, 1], blocks[e, 1, 2] = r1 * a0, r1 * a1 + diagonal, r1 * a2
         blocks[e, 2, 0], blocks[e, 2, 1], blocks[e, 2, 2] = r2 * a0, r2 * a1, r2 * a2 + diagonal
-    _scatter(incidence_indptr, incidence_indices, incidence_data, along_forces, forces)
+    _csr_times(incidence_indptr, incidence_indices, incidence_data, along_forces, forces)
     return collapsed
 
 
@@ -81,20 +81,22 @@ def spring_stiffness_times(u, pairs, directions, axial, transverse, incidence_in
         spring_forces[e, 0] = d0 * -t + along * r0
         spring_forces[e, 1] = d1 * -t + along * r1
         spring_forces[e, 2] = d2 * -t + along * r2
-    _scatter(incidence_indptr, incidence_indices, incidence_data, spring_forces, out)
+    _csr_times(incidence_indptr, incidence_indices, incidence_data, spring_forces, out)
 
 
 @_jit
-def _scatter(indptr, indices, data, spring_vectors, out):  # pragma: no cover (compiled)
-    """``out = incidence @ spring_vectors`` in the order of scipy's CSR product (each row from zero, entry by entry)."""
-    for node in range(indptr.shape[0] - 1):
+def _csr_times(indptr, indices, data, vectors, out):  # pragma: no cover (compiled)
+    """``out = A @ vectors`` for a CSR matrix A and (m, 3) ``vectors`` in the order of scipy's CSR product with
+    several vectors (each row from zero, entry by entry): the springs' incidence scattering their forces, a
+    scalar stiffness matrix applied to each component."""
+    for row in range(indptr.shape[0] - 1):
         f0 = f1 = f2 = 0.0
-        for entry in range(indptr[node], indptr[node + 1]):
-            spring, sign = indices[entry], data[entry]
-            f0 += sign * spring_vectors[spring, 0]
-            f1 += sign * spring_vectors[spring, 1]
-            f2 += sign * spring_vectors[spring, 2]
-        out[node, 0], out[node, 1], out[node, 2] = f0, f1, f2
+        for entry in range(indptr[row], indptr[row + 1]):
+            column, value = indices[entry], data[entry]
+            f0 += value * vectors[column, 0]
+            f1 += value * vectors[column, 1]
+            f2 += value * vectors[column, 2]
+        out[row, 0], out[row, 1], out[row, 2] = f0, f1, f2
 
 
 @_jit
@@ -153,18 +155,10 @@ def _rotate(app, aqq, apq, arp, arq, v0p, v0q, v1p, v1q, v2p, v2q):  # pragma: n
         app[k] = app[k] - t * a
         aqq[k] = aqq[k] + t * a
         apq[k] = 0.0
-        xp, xq = arp[k], arq[k]
-        arp[k] = c * xp - s * xq
-        arq[k] = s * xp + c * xq
-        xp, xq = v0p[k], v0q[k]
-        v0p[k] = c * xp - s * xq
-        v0q[k] = s * xp + c * xq
-        xp, xq = v1p[k], v1q[k]
-        v1p[k] = c * xp - s * xq
-        v1q[k] = s * xp + c * xq
-        xp, xq = v2p[k], v2q[k]
-        v2p[k] = c * xp - s * xq
-        v2q[k] = s * xp + c * xq
+        for first, second in ((arp, arq), (v0p, v0q), (v1p, v1q), (v2p, v2q)):  # unrolled by numba (a tuple)
+            xp, xq = first[k], second[k]
+            first[k] = c * xp - s * xq
+            second[k] = s * xp + c * xq
 
 
 @_jit
@@ -183,13 +177,7 @@ def corotated_times(scalar_indptr, scalar_indices, scalar_data, twist_indptr, tw
         weighted = signs[row] * total
         for entry in range(twist_indptr[row], twist_indptr[row + 1]):
             scattered[twist_indices[entry]] += twist_data[entry] * weighted
-    for node in range(n):  # L u (CSR with three vectors), less the scattered twist part
-        s0 = s1 = s2 = 0.0
-        for entry in range(scalar_indptr[node], scalar_indptr[node + 1]):
-            a, column = scalar_data[entry], scalar_indices[entry]
-            s0 += a * u[column, 0]
-            s1 += a * u[column, 1]
-            s2 += a * u[column, 2]
-        out[node, 0] = s0 - scattered[3 * node]
-        out[node, 1] = s1 - scattered[3 * node + 1]
-        out[node, 2] = s2 - scattered[3 * node + 2]
+    _csr_times(scalar_indptr, scalar_indices, scalar_data, u, out)  # L u, less the scattered twist part
+    for node in range(n):
+        for k in range(3):
+            out[node, k] -= scattered[3 * node + k]
