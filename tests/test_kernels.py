@@ -87,6 +87,17 @@ def test_without_numba_auto_falls_back_and_numba_is_refused_with_the_extra_named
     assert np.isfinite(state.x).all() and state.x[:, 2].min() < 0.0
 
 
+@needs_numba
+def test_a_kernel_compiles_where_numba_has_nowhere_to_cache_it():
+    # A function made from a string has no file, so numba finds no cache location for it and refuses cache=True
+    # (RuntimeError), as it does for a read-only install and home: the kernel is then compiled in the process.
+    from volspring import _compiled
+
+    namespace = {}
+    exec("def double(x):\n    return 2.0 * x\n", namespace)
+    assert _compiled._jit(namespace["double"])(1.5) == 3.0
+
+
 # ---------------------------------------------------------------------------- the kernels against numpy
 def beam_scene(cells, *, model="springs", damping_ratio=None):
     mesh = structured_box(cells, (1.0, 0.2, 0.2))

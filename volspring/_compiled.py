@@ -15,7 +15,14 @@ import numpy as np
 
 __all__ = ["corotated_times", "jacobi_eigh", "spring_linearization", "spring_stiffness_times"]
 
-_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+def _jit(function):
+    """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
+    cache folder); where it finds none (a read-only install and home), numba refuses ``cache=True`` outright, and the
+    kernels are compiled in every process instead."""
+    try:
+        return numba.njit(cache=True, nogil=True, error_model="numpy")(function)
+    except RuntimeError:  # "cannot cache function ...: no locator available"
+        return numba.njit(cache=False, nogil=True, error_model="numpy")(function)
 
 
 @_jit
