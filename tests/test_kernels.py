@@ -72,6 +72,25 @@ def test_numpy_runs_when_chosen_and_auto_runs_numba_when_it_imports():
     assert kernels.select("auto") == ("numba" if HAS_NUMBA else "numpy")
 
 
+def test_a_numba_that_fails_to_import_is_reported_and_numpy_runs(monkeypatch, caplog):
+    import importlib
+
+    original = importlib.import_module
+
+    def refusing(name, *args):  # as numba refuses a numpy it does not support (numba itself is left alone)
+        if name == "numba":
+            raise ImportError("Numba needs NumPy 2.5 or less; got NumPy 9.0.")
+        return original(name, *args)
+
+    monkeypatch.setattr(kernels.importlib, "import_module", refusing)
+    monkeypatch.setattr(kernels, "_module", None)
+    monkeypatch.setattr(kernels, "_missing", None)
+    assert kernels.select("auto") == "numpy"
+    assert "numba is installed but does not import (Numba needs NumPy 2.5 or less" in caplog.text
+    with pytest.raises(ImportError, match=r"Numba needs NumPy 2.5 or less.*pip install 'volspring\[fast\]'"):
+        kernels.select("numba")
+
+
 def test_without_numba_auto_falls_back_and_numba_is_refused_with_the_extra_named(monkeypatch):
     # numba made unimportable (sys.modules entries of None raise ImportError on import), whether it is installed or not
     monkeypatch.setitem(sys.modules, "numba", None)

@@ -28,12 +28,15 @@ from it (0.2 s with numba's import).
 from __future__ import annotations
 
 import importlib
+import logging
 import os
 from types import ModuleType
 
 import numpy as np
 
 __all__ = ["CHOICES", "active", "select", "unsigned"]
+
+logger = logging.getLogger(__name__)
 
 CHOICES = ("auto", "numba", "numpy")
 ENVIRONMENT_VARIABLE = "VOLSPRING_KERNELS"
@@ -104,13 +107,13 @@ def _load(*, required: bool) -> ModuleType | None:
     global _module, _missing
     if _module is None and _missing is None:
         try:
-            compiled_kernels = importlib.import_module("volspring._compiled")
-        except ImportError as error:
-            if error.name != "numba" and not (error.name or "").startswith(("numba.", "llvmlite")):
-                raise  # something of ours, not a missing extra
+            importlib.import_module("numba")
+        except ImportError as error:  # absent, or installed but unusable (numba refuses a numpy it does not support)
             _missing = str(error)
+            if not (isinstance(error, ModuleNotFoundError) and error.name == "numba"):
+                logger.warning("numba is installed but does not import (%s): the hot loops run in numpy", error)
         else:
-            _module = compiled_kernels
+            _module = importlib.import_module("volspring._compiled")  # an error here is ours: it propagates
     if _module is None and required:
         raise ImportError(f"the numba kernels were asked for ({ENVIRONMENT_VARIABLE} or volspring.kernels.select) "
                           f"but numba does not import ({_missing}); install the fast extra: "
