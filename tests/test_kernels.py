@@ -249,6 +249,60 @@ def test_the_per_tet_shear_product_is_numpys_bit_for_bit():
         tets.linearize_operator(x).scaled_times(np.zeros((10, 3)))
 
 
+def random_bsr(rng, block_rows, block_columns, blocksize, density):
+    """A BSR matrix of random blocks, some block rows empty, its block columns in no particular order."""
+    import scipy.sparse as sp
+
+    pattern = sp.random(block_rows, block_columns, density=density, random_state=rng, format="csr")
+    pattern.data[:] = 1.0
+    pattern = pattern.multiply(rng.random(block_rows)[:, None] > 0.1).tocsr()  # empty rows too
+    indices = pattern.indices.copy()
+    for row in range(block_rows):  # unsorted columns: the product's order follows the stored order
+        rng.shuffle(indices[pattern.indptr[row]:pattern.indptr[row + 1]])
+    data = rng.standard_normal((len(indices),) + blocksize)
+    return sp.bsr_matrix((data, indices, pattern.indptr), shape=(block_rows * blocksize[0], block_columns * blocksize[1]))
+
+
+@needs_numba
+@pytest.mark.parametrize("sizes", [(3, 3, 6), (6, 3, 3), (6, 3, 6), (6, 6, 6), (2, 5, 4)])
+def test_the_block_product_is_scipys_bit_for_bit(sizes):
+    """The build's four block sizes (unrolled loops) and one other (loops of run-time length): the same block columns
+    in the same order and the same bits as scipy's product."""
+    from volspring.solvers.amg import _product
+
+    R, N, C = sizes
+    rng = np.random.default_rng(7)
+    left, right = random_bsr(rng, 60, 40, (R, N), 0.1), random_bsr(rng, 40, 50, (N, C), 0.1)
+    reference = left @ right
+    kernels.select("numba")
+    result = _product(left, right)
+    assert result.blocksize == reference.blocksize and result.shape == reference.shape
+    assert np.array_equal(result.indptr, reference.indptr) and np.array_equal(result.indices, reference.indices)
+    assert_same_bits(reference.data, result.data)
+
+
+@needs_numba
+def test_the_multigrid_hierarchy_is_the_same_bit_for_bit():
+    """Every level's matrix, prolongation and restriction of one build (a coarsest level of 60 unknowns makes three
+    levels: products with 3 x 3 and 6 x 6 blocks)."""
+    from meshing.geometry import rigid_body_modes
+    from volspring.solvers.amg import _smoothed_aggregation
+
+    scene = beam_scene((30, 6, 6))
+    matrix, _, pattern = ImplicitEuler().linear_system(scene, scene.initial_state(), 0.01)
+    modes = rigid_body_modes(scene.model.rest_positions[pattern.free_nodes])
+
+    def hierarchy():
+        levels = _smoothed_aggregation(matrix.copy(), modes, theta=0.05, excluded=None, max_coarse=10).levels
+        return [getattr(level, name) for level in levels for name in ("A", "P", "R") if hasattr(level, name)]
+
+    numpy_levels, kernel_levels = under_both(hierarchy)
+    assert len(numpy_levels) >= 7  # at least three levels
+    for reference, result in zip(numpy_levels, kernel_levels):
+        assert np.array_equal(reference.indptr, result.indptr) and np.array_equal(reference.indices, result.indices)
+        assert_same_bits(np.asarray(reference.data), np.asarray(result.data))
+
+
 @needs_numba
 @pytest.mark.parametrize("rung", ["springs", "springs+volume", "smoothed"])
 def test_a_run_is_the_same_bit_for_bit_with_and_without_the_kernels(rung):

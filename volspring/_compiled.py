@@ -13,7 +13,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["corotated_times", "jacobi_eigh", "spring_linearization", "spring_stiffness_times"]
+__all__ = ["block_product", "block_product_rows", "corotated_times", "jacobi_eigh", "spring_linearization",
+           "spring_stiffness_times"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -188,3 +189,72 @@ def corotated_times(scalar_indptr, scalar_indices, scalar_data, twist_indptr, tw
     for node in range(n):
         for k in range(3):
             out[node, k] -= scattered[3 * node + k]
+
+
+@_jit
+def block_product_rows(left_indptr, left_indices, right_indptr, right_indices,
+                       right_block_columns):  # pragma: no cover (compiled; the fast tests compare it with scipy)
+    """(n + 1,) int64 -- the row pointer of the block product of two BSR patterns (the symbolic pass of
+    :func:`block_product`): the distinct block columns each block row of the product reaches."""
+    rows = left_indptr.shape[0] - 1
+    last_row = np.full(right_block_columns, -1, np.int64)
+    indptr = np.empty(rows + 1, np.int64)
+    indptr[0] = 0
+    count = 0
+    for row in range(rows):
+        for entry in range(left_indptr[row], left_indptr[row + 1]):
+            middle = left_indices[entry]
+            for other in range(right_indptr[middle], right_indptr[middle + 1]):
+                column = right_indices[other]
+                if last_row[column] != row:
+                    last_row[column] = row
+                    count += 1
+        indptr[row + 1] = count
+    return indptr
+
+
+@numba.njit(nogil=True, inline="always")
+def _multiply_add(left, right, out, R, N, C):  # pragma: no cover (compiled, inlined)
+    """out (R x C, flat) += left (R x N) right (N x C), each entry from its stored value by one product after
+    another (scipy's ``gemm``). Inlined with literal sizes, the loops unroll."""
+    for r in range(R):
+        for c in range(C):
+            total = out[r * C + c]
+            for d in range(N):
+                total += left[r * N + d] * right[d * C + c]
+            out[r * C + c] = total
+
+
+@_jit
+def block_product(left_indptr, left_indices, left_data, right_indptr, right_indices, right_data, indptr, indices,
+                  data, R, N, C, right_block_columns):  # pragma: no cover (compiled; compared with scipy by the tests)
+    """The block product of two BSR matrices into ``indices`` and ``data`` ((nnzb, R * C)) on the row pointer of
+    :func:`block_product_rows`, as scipy's ``bsr_matmat`` makes it: each block row's columns in the order they are
+    first reached, each block summed from zero product by product, in the order of the left row's blocks and then of
+    the right row's. ``left_data`` is (nnzb, R * N), ``right_data`` (nnzb, N * C). The block sizes of the multigrid
+    build, (R, N, C) = (3, 3, 6), (6, 3, 3), (6, 3, 6) and (6, 6, 6), run with loops the compiler unrolls; others
+    run the same arithmetic with loops of run-time length."""
+    slot = np.full(right_block_columns, -1, np.int64)
+    for row in range(indptr.shape[0] - 1):
+        start = count = indptr[row]
+        for entry in range(left_indptr[row], left_indptr[row + 1]):
+            middle = left_indices[entry]
+            for other in range(right_indptr[middle], right_indptr[middle + 1]):
+                column = right_indices[other]
+                position = slot[column]
+                if position < start:  # first reached in this row
+                    position = slot[column] = count
+                    indices[count] = column
+                    data[count, :] = 0.0
+                    count += 1
+                left, right, out = left_data[entry], right_data[other], data[position]
+                if R == 3 and N == 3 and C == 6:
+                    _multiply_add(left, right, out, 3, 3, 6)
+                elif R == 6 and N == 3 and C == 3:
+                    _multiply_add(left, right, out, 6, 3, 3)
+                elif R == 6 and N == 3 and C == 6:
+                    _multiply_add(left, right, out, 6, 3, 6)
+                elif R == 6 and N == 6 and C == 6:
+                    _multiply_add(left, right, out, 6, 6, 6)
+                else:
+                    _multiply_add(left, right, out, R, N, C)

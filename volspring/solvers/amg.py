@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
+from volspring.kernels import compiled, unsigned
 from volspring.solvers.krylov import SolveInfo, _LinearSolver, _operator, conjugate_gradient
 from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
@@ -876,7 +877,7 @@ def _galerkin(restriction, matrix, prolongation):
     at once (1.9 KiB per node at 45k nodes, the build's peak: its rows are the 2-rings of the aggregates)."""
     if GALERKIN_CHUNKS < 2 or restriction.format != "bsr" or \
             restriction.shape[0] // restriction.blocksize[0] < 2 * GALERKIN_CHUNKS:
-        return restriction @ matrix @ prolongation
+        return _product(_product(restriction, matrix), prolongation)
     rows = restriction.shape[0] // restriction.blocksize[0]
     bounds = np.linspace(0, rows, GALERKIN_CHUNKS + 1).astype(int)
     pieces = []
@@ -885,7 +886,7 @@ def _galerkin(restriction, matrix, prolongation):
         chunk = sp.bsr_matrix((restriction.data[first:last], restriction.indices[first:last],
                                restriction.indptr[start:stop + 1] - first),
                               shape=((stop - start) * restriction.blocksize[0], restriction.shape[1]))
-        pieces.append(chunk @ matrix @ prolongation)
+        pieces.append(_product(_product(chunk, matrix), prolongation))
         del chunk
     data = np.concatenate([piece.data for piece in pieces])
     indices = np.concatenate([piece.indices for piece in pieces])
@@ -893,6 +894,30 @@ def _galerkin(restriction, matrix, prolongation):
     del pieces
     indptr = np.concatenate([[0], np.cumsum(counts)]).astype(indices.dtype)
     return sp.bsr_matrix((data, indices, indptr), shape=(restriction.shape[0], prolongation.shape[1]))
+
+
+def _product(left, right):
+    """``left @ right``; for two float64 BSR matrices whose blocks fit, by the compiled kernel
+    (:mod:`volspring.kernels`) with scipy's arrays bit for bit: the same block columns in the same order, each block
+    summed in the same order. Its loops are unrolled for the build's block sizes, which makes the build's products
+    about twice as fast."""
+    kernels = compiled()
+    if kernels is None or left.format != "bsr" or right.format != "bsr" or left.dtype != np.float64 or \
+            right.dtype != np.float64 or left.blocksize[1] != right.blocksize[0] or left.shape[1] != right.shape[0]:
+        return left @ right
+    (R, N), C = left.blocksize, right.blocksize[1]
+    columns = right.shape[1] // C
+    indptr = kernels.block_product_rows(unsigned(left.indptr), unsigned(left.indices), unsigned(right.indptr),
+                                        unsigned(right.indices), columns)
+    count = int(indptr[-1])
+    index_type = np.int32 if max(count, columns, len(indptr)) < np.iinfo(np.int32).max else np.int64
+    indices, data = np.empty(count, dtype=index_type), np.empty((count, R, C))
+    left_blocks = np.ascontiguousarray(left.data).reshape(-1, R * N)
+    right_blocks = np.ascontiguousarray(right.data).reshape(-1, N * C)
+    kernels.block_product(unsigned(left.indptr), unsigned(left.indices), left_blocks, unsigned(right.indptr),
+                          unsigned(right.indices), right_blocks, indptr, unsigned(indices), data.reshape(-1, R * C),
+                          R, N, C, columns)
+    return sp.bsr_matrix((data, indices, indptr.astype(index_type)), shape=(left.shape[0], right.shape[1]))
 
 
 def _coarsening(matrix, theta: float, excluded: sp.csr_matrix | None) -> tuple:
@@ -917,7 +942,7 @@ def _smoothed_prolongator(smoothing, tentative: sp.bsr_matrix) -> sp.bsr_matrix:
     row_sums = _absolute(smoothing) @ np.ones(smoothing.shape[0])
     weights = np.zeros_like(row_sums)
     np.divide(PROLONGATION_OMEGA, row_sums, out=weights, where=row_sums != 0)
-    correction = smoothing @ tentative
+    correction = _product(smoothing, tentative)
     if correction.format != "bsr":
         correction = correction.tobsr(blocksize=tentative.blocksize)
     scale_rows(correction, weights, copy=False)
