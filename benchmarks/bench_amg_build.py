@@ -11,12 +11,14 @@ times in this process (CPU time, one thread):
   what a step that rebuilds pays;
 
 each as the median over the rounds in mat-vecs with the same matrix, and the share of ``ours`` spent in scipy's
-block sparse products (the prolongation smoothing's A T and the Galerkin products R A P).
+block sparse products (the prolongation smoothing's A T and the Galerkin products R A P; none when the compiled
+kernels of :mod:`volspring.kernels` make them, ``--kernels``).
 
 Run (numpy/scipy threads are held to one before numpy is imported)::
 
     python benchmarks/bench_amg_build.py                 # k = 5, 12, 20: about 1k, 10k and 45k nodes
     python benchmarks/bench_amg_build.py --cells 34 --rounds 2
+    python benchmarks/bench_amg_build.py --kernels numpy numba   # scipy's block products against the compiled ones
 
 This is a script, not a test.
 """
@@ -81,11 +83,17 @@ class ProductClock:
 
 
 def main():
+    from volspring import kernels
+
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cells", type=int, nargs="+", default=[5, 12, 20], help="k of the 5k x k x k cells")
     parser.add_argument("--rounds", type=int, default=4, help="alternating builds per variant")
+    parser.add_argument("--kernels", nargs="+", choices=["auto", "numba", "numpy"], default=["auto"],
+                        help="what ours runs (volspring.kernels), one row each, timed in the same rounds: "
+                             "--kernels numpy numba compares scipy's block products with the compiled ones")
     args = parser.parse_args()
-    print(f"{'nodes':>8} {'pyamg':>10} {'ours':>10} {'ratio':>6} {'build()':>10} {'products in ours':>17}")
+    print(f"{'nodes':>8} {'kernels':>8} {'pyamg':>10} {'ours':>10} {'ratio':>6} {'build()':>10} "
+          f"{'scipy products in ours':>23}")
     for k in args.cells:
         mesh = structured_box((5 * k, k, k), (1.0, 0.2, 0.2))
         model = Model.from_mesh(mesh, MATERIAL)
@@ -93,20 +101,28 @@ def main():
         matrix, _, pattern = ImplicitEuler().linear_system(scene, scene.initial_state(), 0.01)
         modes = rigid_body_modes(model.rest_positions[pattern.free_nodes])
         mv = matvec_seconds(matrix)
-        seconds = {name: [] for name in ("pyamg", "ours", "build")}
-        products = []
+        variants = [("pyamg", pyamg_builder, None)] + [(f"{name} {choice}", build, choice) for choice in args.kernels
+                                                       for name, build in (("ours", ours), ("build", whole_build))]
+        seconds = {name: [] for name, _, _ in variants}
+        products = {choice: [] for choice in args.kernels}
         for _ in range(args.rounds):
-            for name, build in (("pyamg", pyamg_builder), ("ours", ours), ("build", whole_build)):
+            for name, build, choice in variants:
+                if choice is not None:
+                    kernels.select(choice)
                 given = matrix.copy()  # pyamg caches on the matrix it is given
                 with ProductClock() as clock:
                     start = time.process_time()
                     build(given, modes)
                     seconds[name].append(time.process_time() - start)
-                if name == "ours":
-                    products.append(clock.seconds / seconds[name][-1])
-        pyamg_mv, ours_mv, build_mv = (statistics.median(seconds[name]) / mv for name in ("pyamg", "ours", "build"))
-        print(f"{len(mesh.points):>8} {pyamg_mv:>7.0f} mv {ours_mv:>7.0f} mv {ours_mv / pyamg_mv:>6.2f} "
-              f"{build_mv:>7.0f} mv {100 * statistics.median(products):>16.0f}%", flush=True)
+                if name.startswith("ours"):
+                    products[choice].append(clock.seconds / seconds[name][-1])
+        pyamg_mv = statistics.median(seconds["pyamg"]) / mv
+        for choice in args.kernels:
+            kernels.select(choice)
+            ours_mv, build_mv = (statistics.median(seconds[f"{name} {choice}"]) / mv for name in ("ours", "build"))
+            print(f"{len(mesh.points):>8} {kernels.active():>8} {pyamg_mv:>7.0f} mv {ours_mv:>7.0f} mv "
+                  f"{ours_mv / pyamg_mv:>6.2f} {build_mv:>7.0f} mv {100 * statistics.median(products[choice]):>22.0f}%",
+                  flush=True)
 
 
 if __name__ == "__main__":
