@@ -4,13 +4,16 @@ The implicit step spends a quarter of its time outside the linear solve, much of
 forces, Jacobian blocks and stiffness product, which numpy does as several passes over arrays of the
 springs' size (gathers, lengths, outer products, scatters), each with its own temporary; the upper
 rungs of the ladder add the polar decomposition of every tet's and node's deformation gradient,
-whose Jacobi rotations numpy does as dozens of vector operations a sweep. With numba installed
-(``pip install 'volspring[fast]'``) the same arithmetic runs in compiled loops (:mod:`volspring._compiled`).
+whose Jacobi rotations numpy does as dozens of vector operations a sweep; and an AMG build spends
+three quarters of its time in scipy's block sparse products, whose loops do not know the block sizes.
+With numba installed (``pip install 'volspring[fast]'``) the same arithmetic runs in compiled loops
+(:mod:`volspring._compiled`).
 
 The compiled kernels give the numpy code's results bit for bit: every sum is taken in the order
 numpy and scipy take it (a spring's length as numpy's ``einsum`` sums its three squares, a node's
-force and a matrix block in the order of the scatter matrices' rows), so a run is the same with
-or without numba, and a checkpoint written by one resumes in the other. The tests marked ``fast``
+force in the order of the scatter matrix's rows, a block product's blocks in the order scipy's
+``bsr_matmat`` makes and sums them), so a run is the same with or without numba, and a checkpoint
+written by one resumes in the other. The tests marked ``fast``
 check this on every kernel and on whole runs.
 
 Which code runs:
@@ -21,8 +24,8 @@ Which code runs:
 
 Set it with the environment variable ``VOLSPRING_KERNELS`` (read at the first step) or with
 :func:`select` (``select("numpy")`` to time the two against each other in one process). The first
-process to use the kernels compiles them (0.9 s here) into numba's cache on disk; later ones load them
-from it (0.2 s with numba's import).
+process to use the kernels compiles them (about 3 s here) into numba's cache on disk; later ones load
+them from it (0.2 s with numba's import).
 """
 
 from __future__ import annotations
