@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from volspring import kernels
 from volspring.sweep import TIMING_COLUMNS, run_sweep, sweep_client, sweep_combinations
 from volspring.sweep.cli import main
 
@@ -86,6 +87,8 @@ def test_the_cluster_table_equals_the_serial_one_row_for_row(client, mesh_scene,
         assert one["measured"] == other["measured"] and one["solver"] == other["solver"]
         assert one["worker"]["pid"] == os.getpid() and other["worker"]["pid"] != os.getpid()
         assert other["worker"]["blas_threads"]["OPENBLAS_NUM_THREADS"] == "1"
+        # which code ran (the workers inherit the choice): numba where the fast extra is installed
+        assert one["worker"]["kernels"] == other["worker"]["kernels"] == kernels.active()
     assert cluster.executed == len(rows) and cluster.skipped == 0
 
 

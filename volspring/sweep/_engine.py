@@ -346,10 +346,14 @@ def _refused_record(error) -> dict:
 
 
 def _worker() -> dict:
+    """Where a run ran, and what sets its speed there: BLAS threads, and whether the compiled kernels ran (they change
+    the times a record holds, never its numbers: :mod:`volspring.kernels`)."""
     import socket
 
+    from volspring.kernels import active
+
     return {"host": socket.gethostname(), "pid": os.getpid(),
-            "blas_threads": {name: os.environ.get(name) for name in BLAS_ENVIRONMENT}}
+            "blas_threads": {name: os.environ.get(name) for name in BLAS_ENVIRONMENT}, "kernels": active()}
 
 
 def _write_table(table, runs, on_disk, layout) -> None:
