@@ -44,6 +44,8 @@ def test_quick_writes_the_three_outputs(quick_run):
         (case, rung) for case in ("cantilever_gravity", "cantilever_end_load", "hanging_bar", "uniaxial_compression",
                                   "cantilever_modes") for rung in VALIDATED_MODELS}
     assert page.index("<h2") == page.index("<h2 id='ladder'>") < page.index("<table")
+    # The costs say which code ran the timed steps' hot loops (volspring.kernels).
+    assert f"with the {results['ladder']['kernels']} kernels" in page
 
 
 def test_vtu_holds_fem_and_spring_shapes(quick_run):

@@ -12,7 +12,7 @@ from validation.cli import main
 from validation.compare import compare_static
 from validation.ladder import parse_models, run_ladder, rung_constants
 from validation.springs import deformed_volume_change, spring_static
-from volspring import Model
+from volspring import Model, kernels
 from validation.springs import VALIDATED_MODELS
 from volspring.ladder import MODELS
 
@@ -43,6 +43,7 @@ def test_every_rung_has_a_row_with_its_errors_cost_and_matrix_size(cube_ladder):
         # (planes y = 0 and z = 0 slide, x = 0 and x = 1 hold x), 25 of the 27 nodes stay.
         assert row["unknown_count"] == 3 * (case.mesh.node_count - 2)
     assert rows["springs"]["step_cost_vs_springs"] == 1.0  # the baseline, divided by itself
+    assert ladder["kernels"] == kernels.active()  # the code that ran the timed steps (it sets their cost)
     # Stencils over the free nodes: springs couple the 1-ring (a diagonal block per node, two per edge); a
     # nodal strain term couples the 2-ring, a superset.
     points, edges = case.mesh.points, case.mesh.edges

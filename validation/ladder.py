@@ -323,5 +323,8 @@ def run_ladder(cases: Sequence[Case] = (), *, comparisons: Sequence[Comparison] 
         if "refused" not in row:
             measured = constants[row["rung"]][_nu_key(row["nu"])]
             row.update(E_effective_ratio=measured.get("E_ratio"), nu_effective=measured.get("nu_effective"))
+    from volspring.kernels import active
+
+    # The costs depend on which code ran the hot loops (numba's kernels or numpy; never the numbers): say which.
     return {"models": list(models), "rule": LADDER_RULE, "dt_s": dt, "steps": steps, "warmup_steps": WARMUP_STEPS,
-            "constants_cells": cells, "constants": constants, "rows": rows}
+            "kernels": active(), "constants_cells": cells, "constants": constants, "rows": rows}

@@ -12,8 +12,8 @@ results.json layout (units in the key names: ``_m``, ``_m3``, ``_hz``, ``_pa``, 
 - ``schema``, ``created``, ``command``, ``quick``, ``versions`` (python, numpy, scipy, scikit-fem,
   pyamg, meshio, matplotlib, volspring), ``units``, ``notes``, ``rules``, ``models`` (the rungs run);
 - ``ladder``: every rung of :data:`volspring.ladder.MODELS` on every case (:func:`validation.ladder.run_ladder`):
-  ``models``, ``rule`` (of the springs rung), ``dt_s``, ``steps``, ``warmup_steps`` (of the cost
-  measurement), ``constants_cells`` and ``constants.<rung>.<nu>`` (effective ``E_pa``, ``E_ratio``,
+  ``models``, ``rule`` (of the springs rung), ``dt_s``, ``steps``, ``warmup_steps``, ``kernels`` (of the cost
+  measurement: ``numba`` or ``numpy``, :mod:`volspring.kernels`), ``constants_cells`` and ``constants.<rung>.<nu>`` (effective ``E_pa``, ``E_ratio``,
   ``nu_effective``, ``volume_strain_per_axial_strain`` on the cube, or ``refused``), and ``rows``: one
   per case and rung with ``case``, ``rung``, ``nu``, ``node_count``; static cases ``tip_deflection_m``,
   ``reference_tip_deflection_m`` (P2), ``tip_deflection_error``, ``rms_displacement_error``,

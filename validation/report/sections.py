@@ -120,6 +120,15 @@ def _blocks(row) -> str:
     return f"{fmt(row['block_count'])} ({fmt(assembled)})"
 
 
+def _kernels_note(ladder) -> str:
+    """Which code ran the hot loops of the timed steps (results written before volspring.kernels say nothing)."""
+    kernels = ladder.get("kernels")
+    if kernels is None:
+        return ""
+    return (f", with the {html.escape(kernels)} kernels (<code>volspring.kernels</code>: numba's compiled loops "
+            "where the fast extra is installed, numpy otherwise; the same numbers, other times)")
+
+
 def ladder_section(ladder, cases) -> Section:
     """The ladder: one row per case and rung, then the rungs' effective constants."""
     header = ["case", "rung", "nodes", "tip [mm] (reference)", "tip error", "volume change / FEM",
@@ -174,7 +183,7 @@ def ladder_section(ladder, cases) -> Section:
         f"{ladder['constants_cells']}<sup>3</sup> cells, at the case's nu. Cost: the median wall time of one "
         f"implicit Euler step (AMG-preconditioned CG) at dt = {fmt(ladder['dt_s'])} s over {ladder['steps']} "
         f"steps (after {ladder['warmup_steps']} warm-up steps), and its ratio to the springs rung on the same mesh "
-        "and dt, timed alternately in this run; matrix size: the 3x3 blocks of the implicit matrix over the free "
+        f"and dt, timed alternately in this run{_kernels_note(ladder)}; matrix size: the 3x3 blocks of the implicit matrix over the free "
         "nodes (nonzeros = 9 x blocks), and in parentheses the blocks the integrator assembles per step where it "
         "applies the upper rungs' continuum sets as products and assembles only their 1-ring stand-in for the "
         "preconditioner).</p>"
