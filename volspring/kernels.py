@@ -13,8 +13,8 @@ The compiled kernels give the numpy code's results bit for bit: every sum is tak
 numpy and scipy take it (a spring's length as numpy's ``einsum`` sums its three squares, a node's
 force in the order of the scatter matrix's rows, a block product's blocks in the order scipy's
 ``bsr_matmat`` makes and sums them), so a run is the same with or without numba, and a checkpoint
-written by one resumes in the other. The tests marked ``fast``
-check this on every kernel and on whole runs.
+written by one resumes in the other. The tests marked ``fast`` check this on every kernel, on a
+multigrid hierarchy and on whole runs.
 
 Which code runs:
 

@@ -138,7 +138,7 @@ def _jacobi_eigh(C, sweeps=_JACOBI_SWEEPS):
     a = C if isinstance(C, dict) else {(i, j): C[:, i, j].copy() for i in range(3) for j in range(i, 3)}
     m = len(a[0, 0])
     kernels = compiled()
-    if kernels is not None:  # the same rotations compiled, one matrix at a time (volspring.kernels)
+    if kernels is not None:  # the same rotations in the same order, compiled (volspring.kernels)
         entries = np.array([a[key] for key in _UPPER], dtype=np.float64)
         vectors = np.empty((9, m))
         converged = kernels.jacobi_eigh(entries, sweeps, _JACOBI_MAX_SWEEPS, _ROTATION_TABLE, vectors)
