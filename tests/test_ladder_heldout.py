@@ -43,8 +43,10 @@ def test_smoothed_rung_tracks_the_reference_where_springs_do_not(name, nu):
     assert abs(ratios["smoothed"] - 1) < 0.4 * abs(ratios["springs"] - 1)
 
 
-_DRIFT_MISSES = {"bunny_gravity": "measured -5.0% (1.035 -> 0.983): not the clamp (free-node domains moved it "
-                                   "from -5.3%), nor the constraint count (clusters of four: -4.2%)"}
+_DRIFT_MISSES = {"bunny_gravity": "measured -5.0% (1.035 -> 0.983), and -4.9% against the converged reference "
+                                   "(Taylor-Hood on the mesh refined once, itself +0.1%): not the reference, nor the "
+                                   "clamp (free-node domains moved it from -5.3%), nor the constraint count (clusters "
+                                   "of four: -4.2%)"}
 
 
 @pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.xfail(strict=True, reason=_DRIFT_MISSES[name]))
