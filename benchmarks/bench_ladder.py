@@ -16,6 +16,12 @@ Run (one thread, as every timing in this project)::
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --cells 50 10 10 --steps 10
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --nu 0.499 --steps 30   # nearly incompressible
     OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --kernels numpy numba --steps 30
+    OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 python benchmarks/bench_ladder.py --levers --steps 20 --rounds 5
+
+``--levers`` also times, for the rungs applied as products, CG's first guess applied to the last velocity changes
+at once (each sparse factor read once, as the step does) against one change after another (each product then reads
+them again), in the same rounds: the guess's products with the sets applied as products, in mat-vecs of the springs'
+system (as the table's last column), and the whole step.
 
 This is a script, not a test.
 """
@@ -72,6 +78,64 @@ def matvec_seconds(scene, repeats=20):
     return (time.perf_counter() - start) / repeats, pattern.block_count
 
 
+def one_by_one(linearization, U):
+    """The products of an operator linearisation with the columns of U, one after another: what the step did before
+    applying them at once (``--levers``)."""
+    return linearization.scale * np.stack([linearization._times(np.ascontiguousarray(U[:, :, j]))
+                                           for j in range(U.shape[2])], axis=2)
+
+
+def guess_products(scene, count, repeats=10):
+    """Seconds of ``count`` products with the system as CG's first guess applies them: at once, and one by one."""
+    from volspring.assembly import BlockPattern
+    from volspring.elements.base import OperatorLinearization
+
+    pattern = BlockPattern(scene.model, scene.free, matrix_free=True)
+    linearization = pattern.linearize(scene.model.rest_positions, stiffness_scale=1e-4)
+    operator = pattern.operator(linearization)
+    vectors = np.random.default_rng(0).standard_normal((pattern.size, count))
+    seconds = {}
+    for name in ("at once", "one by one"):
+        original = OperatorLinearization.scaled_times_many
+        if name == "one by one":
+            OperatorLinearization.scaled_times_many = one_by_one
+        try:
+            start = time.perf_counter()
+            for _ in range(repeats):
+                operator @ vectors
+            seconds[name] = (time.perf_counter() - start) / repeats
+        finally:
+            OperatorLinearization.scaled_times_many = original
+    return seconds
+
+
+def levers(scenes, args):
+    """The step with the guess's products at once and one by one, alternating in the same rounds (``--levers``)."""
+    from volspring.elements.base import OperatorLinearization
+    from volspring.integrators.implicit import WARM_START
+
+    original = OperatorLinearization.scaled_times_many
+    rungs = [rung for rung, scene in scenes.items() if rung != "springs"]
+    times = {(rung, name): [] for rung in rungs for name in ("at once", "one by one")}
+    for _ in range(args.rounds):
+        for rung in rungs:
+            for name in ("at once", "one by one"):
+                OperatorLinearization.scaled_times_many = original if name == "at once" else one_by_one
+                try:
+                    times[rung, name].append(time_steps(scenes[rung], args.steps, args.dt)[0])
+                finally:
+                    OperatorLinearization.scaled_times_many = original
+    print(f"\nlever: CG's first guess applies the system to the last {WARM_START} velocity changes at once")
+    print(f"{'rung':16s} {'products at once':>17s} {'one by one':>11s} {'ms/step at once':>16s} {'one by one':>11s} "
+          f"{'ratio':>6s}   (products: in the springs' mat-vecs)")
+    mv = matvec_seconds(scenes["springs"])[0]
+    for rung in rungs:
+        products = guess_products(scenes[rung], WARM_START)
+        at_once, separate = (statistics.median(times[rung, name]) for name in ("at once", "one by one"))
+        print(f"{rung:16s} {products['at once'] / mv:17.1f} {products['one by one'] / mv:11.1f} "
+              f"{1e3 * at_once:16.1f} {1e3 * separate:11.1f} {at_once / separate:6.2f}")
+
+
 def main():
     from volspring.ladder import MODELS
 
@@ -84,6 +148,8 @@ def main():
     parser.add_argument("--kernels", nargs="+", choices=["auto", "numba", "numpy"], default=["auto"],
                         help="what the hot loops run (volspring.kernels): one table each, timed alternately in the "
                              "same rounds; --kernels numpy numba compares them (the numba one needs the fast extra)")
+    parser.add_argument("--levers", action="store_true",
+                        help="also time CG's first guess applied at once against one product after another")
     args = parser.parse_args()
     scenes = {rung: build(rung, args.cells, args.nu) for rung in MODELS}
     from volspring import kernels
@@ -119,6 +185,8 @@ def main():
         print(f"step with {second} / with {first}: " + ", ".join(
             f"{rung} {statistics.median(step_times[second, rung]) / statistics.median(step_times[first, rung]):.2f}"
             for rung in MODELS))
+    if args.levers:
+        levers(scenes, args)
 
 
 if __name__ == "__main__":

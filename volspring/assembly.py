@@ -384,7 +384,17 @@ class BlockPattern:
                 total += lin.scaled_times(u)
             return self.restrict(total)
 
-        return LinearOperator((self.size, self.size), matvec=times, rmatvec=times, dtype=np.float64)
+        def times_many(P):  # (3f, k): each column the bits of times(P[:, j]), the sets' sparse factors read once
+            k = P.shape[1]
+            U = np.zeros((n, 3, k))
+            U[self.free_nodes] = np.reshape(P, (-1, 3, k))
+            total = applied[0].scaled_times_many(U)
+            for lin in applied[1:]:
+                total += lin.scaled_times_many(U)
+            return np.ascontiguousarray(total[self.free_nodes]).reshape(-1, k)
+
+        return LinearOperator((self.size, self.size), matvec=times, rmatvec=times, matmat=times_many,
+                              rmatmat=times_many, dtype=np.float64)
 
     def wrap(self, data: np.ndarray) -> sp.bsr_matrix:
         """A BSR matrix around a data array of this pattern (no copy, no format check)."""

@@ -110,12 +110,17 @@ class OperatorLinearization(Linearization):
     element_set : ElementSet
     preconditioner : callable
         ``preconditioner() -> (e, b, 3, 3)`` stand-in blocks, already scaled
+    times_many : callable, optional
+        ``times_many(U) -> K U`` for (n, 3, k) U, each column the bits of ``times`` (the sparse factors read once
+        for all k); default ``times`` column by column
     """
 
     def __init__(self, forces: np.ndarray, times: Callable[[np.ndarray], np.ndarray], scale: float,
-                 element_set: ElementSet, preconditioner: Callable[[], np.ndarray] | None):
+                 element_set: ElementSet, preconditioner: Callable[[], np.ndarray] | None,
+                 times_many: Callable[[np.ndarray], np.ndarray] | None = None):
         super().__init__(forces, None, None, element_set)
         self._times, self.scale, self._preconditioner = times, float(scale), preconditioner
+        self._times_many = times_many
 
     def dfdx_times(self, u: np.ndarray) -> np.ndarray:
         return -self._times(u)
@@ -123,6 +128,12 @@ class OperatorLinearization(Linearization):
     def scaled_times(self, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- (c_K K + c_D C) u."""
         return self.scale * self._times(u)
+
+    def scaled_times_many(self, U: np.ndarray) -> np.ndarray:
+        """(n, 3, k) float -- (c_K K + c_D C) U, column j the bits of ``scaled_times(U[:, :, j])``."""
+        if self._times_many is not None:
+            return self.scale * self._times_many(U)
+        return self.scale * np.stack([self._times(np.ascontiguousarray(U[:, :, j])) for j in range(U.shape[2])], axis=2)
 
     def preconditioner_blocks(self) -> np.ndarray:
         if self._preconditioner is None:

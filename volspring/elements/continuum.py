@@ -117,9 +117,10 @@ class _TetContinuum(ElementSet):
         """c_K + c_D b: the factor of K in the system (the damping blocks are b K)."""
         return stiffness_scale + damping_scale * self.stiffness_damping
 
-    def _operator(self, forces, times, x, stiffness_scale, damping_scale) -> OperatorLinearization:
+    def _operator(self, forces, times, x, stiffness_scale, damping_scale, times_many=None) -> OperatorLinearization:
         scale = self._scale(stiffness_scale, damping_scale)
-        return OperatorLinearization(forces, times, scale, self, lambda: scale * self.preconditioner_blocks(x))
+        return OperatorLinearization(forces, times, scale, self, lambda: scale * self.preconditioner_blocks(x),
+                                     times_many)
 
     def with_stiffness_damping(self, b: float) -> Self:
         """A copy with Rayleigh stiffness damping b [s] (the kinematics and domains are shared)."""
@@ -257,6 +258,19 @@ class CorotatedTets(_TetContinuum):
         rows *= np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))[:, :, None, None]
         indices, indptr = self._twist_layout
         signs, L = np.sign(coefficients).ravel(), self._scalar_part
+        Q = sp.csr_matrix((rows.ravel(), indices, indptr), shape=(len(indptr) - 1, 3 * self.node_count))
+        Qt = Q.T
+
+        def times(u):
+            u = np.asarray(u, dtype=np.float64).reshape(-1, 3)
+            return L @ u - (Qt @ (signs * (Q @ u.ravel()))).reshape(-1, 3)
+
+        def times_many(U):  # (n, 3, k): the same sums for every column, each matrix read once
+            n, _, k = U.shape
+            U = np.asarray(U, dtype=np.float64)
+            return (L @ U.reshape(n, 3 * k)).reshape(n, 3, k) - \
+                (Qt @ (signs[:, None] * (Q @ U.reshape(3 * n, k)))).reshape(n, 3, k)
+
         kernels = compiled()
         if kernels is not None:  # the same sums compiled, each twist row read once (volspring.kernels)
             data, n = rows.reshape(-1), self.node_count
@@ -272,15 +286,8 @@ class CorotatedTets(_TetContinuum):
                                         signs, u, out)
                 return out
 
-            return self._operator(forces, compiled_times, x, stiffness_scale, damping_scale)
-        Q = sp.csr_matrix((rows.ravel(), indices, indptr), shape=(len(indptr) - 1, 3 * self.node_count))
-        Qt = Q.T
-
-        def times(u):
-            u = np.asarray(u, dtype=np.float64).reshape(-1, 3)
-            return L @ u - (Qt @ (signs * (Q @ u.ravel()))).reshape(-1, 3)
-
-        return self._operator(forces, times, x, stiffness_scale, damping_scale)
+            times = compiled_times
+        return self._operator(forces, times, x, stiffness_scale, damping_scale, times_many)
 
     @cached_property
     def _twist_layout(self):
@@ -507,17 +514,39 @@ class NodalStrain(_TetContinuum):
         domains = self.domains
         result = np.zeros((self.node_count, 3))
         if self.bulk.any():
-            if "volume_rows" not in state:  # kept in the state: CG applies the product many times at one state
-                indices, indptr = domains.volume_layout
-                W = sp.csr_matrix((self._ring_volume_gradients(state).ravel(), indices, indptr),
-                                  shape=(domains.domain_count, 3 * self.node_count))
-                state["volume_rows"] = W, W.T  # the transpose as a CSC view: no conversion per step
-            W, Wt = state["volume_rows"]
+            W, Wt = self._volume_rows(state)
             rate = W @ u.ravel()  # dv_d = sum_a (dv_d/dx_a) . u_a
             result += (Wt @ (self.bulk / domains.volumes * rate)).reshape(-1, 3)
         if "P" in state:
             dP = 2.0 * _hessian_times(state["twists"], state["coefficients"], domains.averaged(u))
             result += domains.spread((self.shear * domains.volumes)[:, None, None] * dP)
+        return result
+
+    def _volume_rows(self, state):
+        """(W, W^T) -- the (d, 3 n) rows dv_d/dx at ``state`` (CSR) and their transpose (a CSC view: no conversion),
+        made once per state and kept in it: CG applies the product many times at one state."""
+        if "volume_rows" not in state:
+            indices, indptr = self.domains.volume_layout
+            W = sp.csr_matrix((self._ring_volume_gradients(state).ravel(), indices, indptr),
+                              shape=(self.domains.domain_count, 3 * self.node_count))
+            state["volume_rows"] = W, W.T
+        return state["volume_rows"]
+
+    def _stiffness_times_many(self, state, U):
+        """(n, 3, k) -- K U, column j the bits of ``_stiffness_times(state, U[:, :, j])``: the sparse factors (the
+        domains' volume rows, averaging and spreading) are read once for all columns."""
+        domains = self.domains
+        n, _, k = U.shape
+        result = np.zeros((n, 3, k))
+        if self.bulk.any():
+            W, Wt = self._volume_rows(state)
+            rate = W @ U.reshape(3 * n, k)
+            result += (Wt @ ((self.bulk / domains.volumes)[:, None] * rate)).reshape(n, 3, k)
+        if "P" in state:
+            weights = (self.shear * domains.volumes)[:, None, None]
+            dP = [weights * (2.0 * _hessian_times(state["twists"], state["coefficients"], dF))
+                  for dF in domains.averaged_many(U)]
+            result += domains.spread_many(np.stack(dP, axis=-1))
         return result
 
     def _blocks(self, state, exact):
@@ -624,7 +653,8 @@ class NodalStrain(_TetContinuum):
         if v is not None and self.stiffness_damping:
             forces -= self.stiffness_damping * self._stiffness_times(state, np.asarray(v, dtype=np.float64))
         return self._operator(forces, lambda u: self._stiffness_times(state, np.asarray(u, dtype=np.float64)), x,
-                              stiffness_scale, damping_scale)
+                              stiffness_scale, damping_scale,
+                              lambda U: self._stiffness_times_many(state, np.asarray(U, dtype=np.float64)))
 
     def per_tet(self) -> dict:
         """The constructor's per-tet inputs back: ``shear``, ``bulk``, ``regions`` and ``stand_in_bulk`` (T,) arrays.

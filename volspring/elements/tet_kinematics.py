@@ -405,6 +405,21 @@ class SmoothingDomains:
         :meth:`averaged`: forces are ``-spread(V_d P_d)``)."""
         return sum(Gt @ np.ascontiguousarray(stress[:, :, k]) for k, Gt in enumerate(self._spreading))
 
+    def averaged_many(self, U: np.ndarray) -> list[np.ndarray]:
+        """k (d, 3, 3) float arrays -- :meth:`averaged` of each column of (n, 3, k) ``U``, the same bits, each
+        averaging matrix read once."""
+        n, _, k = U.shape
+        F = np.stack([(G @ U.reshape(n, 3 * k)).reshape(-1, 3, k) for G in self._averaging], axis=2)  # (d, i, c, j)
+        return [np.ascontiguousarray(F[..., j]) for j in range(k)]
+
+    def spread_many(self, stress: np.ndarray) -> np.ndarray:
+        """(n, 3, k) float -- :meth:`spread` of each (d, 3, 3) ``stress[..., j]``, the same bits, each spreading
+        matrix read once."""
+        d, _, _, k = stress.shape
+        total = sum(Gt @ np.ascontiguousarray(stress[:, :, c, :]).reshape(d, 3 * k)
+                    for c, Gt in enumerate(self._spreading))
+        return total.reshape(-1, 3, k)
+
     @cached_property
     def volume_layout(self) -> tuple:
         """(indices, indptr) of a (d, 3 n) CSR matrix with one row per domain and the three unknowns of
