@@ -29,6 +29,7 @@ This is a script, not a test.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import time
 
@@ -78,60 +79,61 @@ def matvec_seconds(scene, repeats=20):
     return (time.perf_counter() - start) / repeats, pattern.block_count
 
 
-def one_by_one(linearization, U):
-    """The products of an operator linearisation with the columns of U, one after another: what the step did before
-    applying them at once (``--levers``)."""
-    return linearization.scale * np.stack([linearization._times(np.ascontiguousarray(U[:, :, j]))
-                                           for j in range(U.shape[2])], axis=2)
+#: How CG's first guess makes its products in ``--levers``: as the step does, and as it did before.
+WAYS = ("at once", "one by one")
+
+
+@contextlib.contextmanager
+def guess(way):
+    """CG's first guess made as the step makes it (``"at once"``: the sets' products with all past changes in one
+    pass) or ``"one by one"`` (:meth:`OperatorLinearization.scaled_times_each`, what the step did before)."""
+    from volspring.elements.base import OperatorLinearization
+
+    original = OperatorLinearization.scaled_times_many
+    if way == "one by one":
+        OperatorLinearization.scaled_times_many = OperatorLinearization.scaled_times_each
+    try:
+        yield
+    finally:
+        OperatorLinearization.scaled_times_many = original
 
 
 def guess_products(scene, count, repeats=10):
-    """Seconds of ``count`` products with the system as CG's first guess applies them: at once, and one by one."""
+    """Seconds of ``count`` products with the sets applied as products, as CG's first guess makes them: at once, and
+    one by one."""
     from volspring.assembly import BlockPattern
-    from volspring.elements.base import OperatorLinearization
 
     pattern = BlockPattern(scene.model, scene.free, matrix_free=True)
-    linearization = pattern.linearize(scene.model.rest_positions, stiffness_scale=1e-4)
-    operator = pattern.operator(linearization)
+    operator = pattern.operator(pattern.linearize(scene.model.rest_positions, stiffness_scale=1e-4))
     vectors = np.random.default_rng(0).standard_normal((pattern.size, count))
     seconds = {}
-    for name in ("at once", "one by one"):
-        original = OperatorLinearization.scaled_times_many
-        if name == "one by one":
-            OperatorLinearization.scaled_times_many = one_by_one
-        try:
+    for way in WAYS:
+        with guess(way):
             start = time.perf_counter()
             for _ in range(repeats):
                 operator @ vectors
-            seconds[name] = (time.perf_counter() - start) / repeats
-        finally:
-            OperatorLinearization.scaled_times_many = original
+            seconds[way] = (time.perf_counter() - start) / repeats
     return seconds
 
 
 def levers(scenes, args):
     """The step with the guess's products at once and one by one, alternating in the same rounds (``--levers``)."""
-    from volspring.elements.base import OperatorLinearization
     from volspring.integrators.implicit import WARM_START
 
-    original = OperatorLinearization.scaled_times_many
-    rungs = [rung for rung, scene in scenes.items() if rung != "springs"]
-    times = {(rung, name): [] for rung in rungs for name in ("at once", "one by one")}
+    rungs = [rung for rung in scenes if rung != "springs"]
+    times = {(rung, way): [] for rung in rungs for way in WAYS}
     for _ in range(args.rounds):
         for rung in rungs:
-            for name in ("at once", "one by one"):
-                OperatorLinearization.scaled_times_many = original if name == "at once" else one_by_one
-                try:
-                    times[rung, name].append(time_steps(scenes[rung], args.steps, args.dt)[0])
-                finally:
-                    OperatorLinearization.scaled_times_many = original
+            for way in WAYS:
+                with guess(way):
+                    times[rung, way].append(time_steps(scenes[rung], args.steps, args.dt)[0])
     print(f"\nlever: CG's first guess applies the system to the last {WARM_START} velocity changes at once")
     print(f"{'rung':16s} {'products at once':>17s} {'one by one':>11s} {'ms/step at once':>16s} {'one by one':>11s} "
           f"{'ratio':>6s}   (products: in the springs' mat-vecs)")
     mv = matvec_seconds(scenes["springs"])[0]
     for rung in rungs:
         products = guess_products(scenes[rung], WARM_START)
-        at_once, separate = (statistics.median(times[rung, name]) for name in ("at once", "one by one"))
+        at_once, separate = (statistics.median(times[rung, way]) for way in WAYS)
         print(f"{rung:16s} {products['at once'] / mv:17.1f} {products['one by one'] / mv:11.1f} "
               f"{1e3 * at_once:16.1f} {1e3 * separate:11.1f} {at_once / separate:6.2f}")
 

@@ -133,6 +133,11 @@ class OperatorLinearization(Linearization):
         """(n, 3, k) float -- (c_K K + c_D C) U, column j the bits of ``scaled_times(U[:, :, j])``."""
         if self._times_many is not None:
             return self.scale * self._times_many(U)
+        return self.scaled_times_each(U)
+
+    def scaled_times_each(self, U: np.ndarray) -> np.ndarray:
+        """(n, 3, k) float -- :meth:`scaled_times_many` one column after another (each product reads the set's
+        factors again)."""
         return self.scale * np.stack([self._times(np.ascontiguousarray(U[:, :, j])) for j in range(U.shape[2])], axis=2)
 
     def preconditioner_blocks(self) -> np.ndarray:
