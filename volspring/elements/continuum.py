@@ -261,15 +261,14 @@ class CorotatedTets(_TetContinuum):
         Q = sp.csr_matrix((rows.ravel(), indices, indptr), shape=(len(indptr) - 1, 3 * self.node_count))
         Qt = Q.T
 
-        def times(u):
-            u = np.asarray(u, dtype=np.float64).reshape(-1, 3)
-            return L @ u - (Qt @ (signs * (Q @ u.ravel()))).reshape(-1, 3)
-
-        def times_many(U):  # (n, 3, k): the same sums for every column, each matrix read once
+        def times_many(U):  # (n, 3, k): each matrix read once for all columns, each column's sums as alone
             n, _, k = U.shape
             U = np.asarray(U, dtype=np.float64)
             return (L @ U.reshape(n, 3 * k)).reshape(n, 3, k) - \
                 (Qt @ (signs[:, None] * (Q @ U.reshape(3 * n, k)))).reshape(n, 3, k)
+
+        def times(u):
+            return times_many(np.reshape(u, (-1, 3, 1)))[:, :, 0]
 
         kernels = compiled()
         if kernels is not None:  # the same sums compiled, each twist row read once (volspring.kernels)
@@ -511,16 +510,7 @@ class NodalStrain(_TetContinuum):
 
     def _stiffness_times(self, state, u):
         """(n, 3) -- K u with the projected K at ``state``, without forming K."""
-        domains = self.domains
-        result = np.zeros((self.node_count, 3))
-        if self.bulk.any():
-            W, Wt = self._volume_rows(state)
-            rate = W @ u.ravel()  # dv_d = sum_a (dv_d/dx_a) . u_a
-            result += (Wt @ (self.bulk / domains.volumes * rate)).reshape(-1, 3)
-        if "P" in state:
-            dP = 2.0 * _hessian_times(state["twists"], state["coefficients"], domains.averaged(u))
-            result += domains.spread((self.shear * domains.volumes)[:, None, None] * dP)
-        return result
+        return self._stiffness_times_many(state, u.reshape(-1, 3, 1))[:, :, 0]
 
     def _volume_rows(self, state):
         """(W, W^T) -- the (d, 3 n) rows dv_d/dx at ``state`` (CSR) and their transpose (a CSC view: no conversion),

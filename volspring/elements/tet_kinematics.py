@@ -398,23 +398,23 @@ class SmoothingDomains:
 
     def averaged(self, x: np.ndarray) -> np.ndarray:
         """(d, 3, 3) float -- Fbar_d at positions x."""
-        return np.stack([G @ x for G in self._averaging], axis=2)
+        return self.averaged_many(np.reshape(x, (-1, 3, 1)))[0]
 
     def spread(self, stress: np.ndarray) -> np.ndarray:
         """(n, 3) float -- sum_d stress_d gbar_da per node a, for (d, 3, 3) ``stress`` (the transpose of
         :meth:`averaged`: forces are ``-spread(V_d P_d)``)."""
-        return sum(Gt @ np.ascontiguousarray(stress[:, :, k]) for k, Gt in enumerate(self._spreading))
+        return self.spread_many(stress[..., None])[:, :, 0]
 
     def averaged_many(self, U: np.ndarray) -> list[np.ndarray]:
-        """k (d, 3, 3) float arrays -- :meth:`averaged` of each column of (n, 3, k) ``U``, the same bits, each
-        averaging matrix read once."""
+        """k (d, 3, 3) float arrays -- :meth:`averaged` of each column of (n, 3, k) ``U``, each averaging matrix read
+        once for all columns (each column's sums as alone)."""
         n, _, k = U.shape
         F = np.stack([(G @ U.reshape(n, 3 * k)).reshape(-1, 3, k) for G in self._averaging], axis=2)  # (d, i, c, j)
         return [np.ascontiguousarray(F[..., j]) for j in range(k)]
 
     def spread_many(self, stress: np.ndarray) -> np.ndarray:
-        """(n, 3, k) float -- :meth:`spread` of each (d, 3, 3) ``stress[..., j]``, the same bits, each spreading
-        matrix read once."""
+        """(n, 3, k) float -- :meth:`spread` of each (d, 3, 3) ``stress[..., j]``, each spreading matrix read once
+        for all columns (each column's sums as alone)."""
         d, _, _, k = stress.shape
         total = sum(Gt @ np.ascontiguousarray(stress[:, :, c, :]).reshape(d, 3 * k)
                     for c, Gt in enumerate(self._spreading))
