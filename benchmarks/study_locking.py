@@ -22,7 +22,9 @@ lambda) over smoothing domains d, eps_d the volume-weighted mean of the tets' st
 ``clusterK`` the node domains merged K at a time (greedy agglomeration along mesh edges)
 ``free``     the node domains of the nodes the case does not clamp (a diagnostic: needs the supports)
 ``free pairs`` node pairs (``pair_nodes``) whose domains are the free nodes': a tet's volume shared by its
-             free corners (the smoothed rung in a scene with supports, ``NodalStrain.supported``)
+             free corners (the smoothed rung in a scene with supports, ``NodalStrain.supported``); with
+             ``pair_bulk_cap`` c the pairs take min(lambda, c mu) and the pairs merged by ``merged_pairs``
+             the rest (the rung since ``volspring.ladder.PAIR_BULK_CAP``)
 
 All of them pass the patch test (a uniform strain is exact in every domain). Reported per shape and
 nu: the displacement of the node the reference moves most, along the reference's direction there,
@@ -247,16 +249,17 @@ class SmoothedOperators:
             self._cache[key] = result
         return result
 
-    def free_pair_volume(self, held):
+    def free_pair_volume(self, held, rule="pairs"):
         """(3n, 3n) volume stiffness (lambda = 1) on node pairs whose domains are the free nodes': a tet's volume
-        shared equally among its free corners (volspring's NodalStrain(clusters="pairs", held=held), linearised)."""
-        from volspring.elements.tet_kinematics import pair_nodes
+        shared equally among its free corners (volspring's NodalStrain(clusters=rule, held=held), linearised;
+        ``rule`` one of volspring.elements.continuum.CLUSTER_RULES)."""
+        from volspring.elements.continuum import CLUSTER_RULES
 
         tets, n = self.mesh.tets, self.n
         free = ~held[tets]
         share = np.where(free, self.volumes[:, None] / np.maximum(free.sum(axis=1), 1)[:, None], 0.0)
         rows = np.repeat(np.arange(len(tets)), 4)
-        labels = pair_nodes(self.mesh.points, tets)
+        labels = CLUSTER_RULES[rule](self.mesh.points, tets)
         shares = sp.csr_matrix((share.ravel(), (labels[tets.ravel()], rows)), shape=(n, len(tets)))
         Vd = np.asarray(shares.sum(axis=1)).ravel()
         shares, Vd = shares[Vd > 0], Vd[Vd > 0]
@@ -314,7 +317,10 @@ def candidate_stiffness(spec, operators, material, held):
     if volume == "free":
         K = K + lam * operators.matrices("node", (~held).astype(float))[1]
     elif volume == "free pairs":
-        K = K + lam * operators.free_pair_volume(held)
+        on_pairs = min(lam, spec.get("pair_bulk_cap", np.inf) * mu)  # the rest on merged pairs (the rung's split)
+        K = K + on_pairs * operators.free_pair_volume(held)
+        if lam > on_pairs:
+            K = K + (lam - on_pairs) * operators.free_pair_volume(held, "merged pairs")
     else:
         K = K + lam * operators.matrices(volume)[1]
     return K
@@ -365,7 +371,11 @@ def candidates():
     specs["face/node a=0.5, vol free pairs"] = {"shear": [("face", 0.5), ("node", 0.5)], "volume": "free pairs"}
     specs["edge/node a=0.1, vol free pairs"] = {"shear": [("edge", 0.9), ("node", 0.1)], "volume": "free pairs"}
     specs["a=0.65, vol on unclamped nodes"] = {"shear": [("tet", 0.35), ("node", 0.65)], "volume": "free"}
-    specs["a=0.65, vol pairs of free nodes (ours)"] = {"shear": [("tet", 0.35), ("node", 0.65)], "volume": "free pairs"}
+    specs["a=0.65, vol pairs of free nodes"] = {"shear": [("tet", 0.35), ("node", 0.65)], "volume": "free pairs"}
+    # The rung (volspring.ladder.PAIR_BULK_CAP): the pairs keep min(lambda, cap mu), merged pairs take the rest.
+    for cap in (10, 16, 20, 25):
+        label = f"a=0.65, pairs <= {cap} mu + merged" + (" (ours)" if cap == 20 else "")
+        specs[label] = {"shear": [("tet", 0.35), ("node", 0.65)], "volume": "free pairs", "pair_bulk_cap": cap}
     for size in (2, 3, 4):
         for a in (0.6, 0.65, 0.7):
             specs[f"a={a:g}, vol cluster{size}"] = {"shear": [("tet", 1 - a), ("node", a)], "volume": f"cluster{size}"}

@@ -71,10 +71,13 @@ everything else (integrators, supports, collisions, output); it differs only in 
     The node-based selective smoothed element (alpha-FEM / NS-FEM with nodal volume):
     :class:`~volspring.elements.CorotatedTets` with shear (1 - alpha) mu, a
     :class:`~volspring.elements.NodalStrain` with shear alpha mu on node domains, and one with bulk
-    lambda on pairs of nodes (:func:`~volspring.elements.tet_kinematics.pair_nodes`: one volume
-    constraint per node locks partially on coarse meshes whose nodes are mostly on the surface,
-    ``benchmarks/study_locking.py``; a scene gives the pairs' volume to the nodes its supports leave free,
-    :meth:`~volspring.elements.NodalStrain.supported`), mu and lambda straight from E and nu, no calibration. It passes
+    min(lambda, :data:`PAIR_BULK_CAP` mu) on pairs of nodes (:func:`~volspring.elements.tet_kinematics.pair_nodes`:
+    one volume constraint per node locks partially on coarse meshes whose nodes are mostly on the surface,
+    ``benchmarks/study_locking.py``); above the cap (nu > 0.476) the rest of lambda is on the coarser domains of
+    :func:`~volspring.elements.tet_kinematics.merged_pairs`, pairs with no interior node merged into a neighbour,
+    which do not lock as nu -> 1/2 while the pairs' part keeps every volume change in between stiff. A scene
+    gives both sets' volume to the nodes its supports leave free (:meth:`~volspring.elements.NodalStrain.supported`);
+    mu and lambda come straight from E and nu, no calibration. It passes
     the patch test (exact E and nu on any mesh); its stiffness couples each node's 2-ring (the
     implicit step applies it as a product, :mod:`volspring.integrators.implicit`).
 
@@ -101,7 +104,7 @@ if TYPE_CHECKING:
     from meshing.mesh import TetMesh
     from volspring.elements.springs import Springs
 
-__all__ = ["DEFAULT_ALPHA", "MODELS", "STAND_IN_BULK_CAP", "TetMaterials", "network_moduli", "network_poisson_ratio",
+__all__ = ["DEFAULT_ALPHA", "MODELS", "PAIR_BULK_CAP", "STAND_IN_BULK_CAP", "TetMaterials", "network_moduli", "network_poisson_ratio",
            "smoothed_elements", "stand_in_bulk", "volume_rung_moduli"]
 
 MODELS = ("springs", "springs+volume", "smoothed")
@@ -116,6 +119,15 @@ DEFAULT_ALPHA = 0.65
 #: but saved nothing at 0.45; one of 3 cost the smoothed rung 2% more at 0.45 (NodalStrain.preconditioner_blocks
 #: has the figures). ``benchmarks/bench_ladder.py --nu 0.499`` prints the steps.
 STAND_IN_BULK_CAP = 5.0
+#: The smoothed rung's volume term on node pairs takes min(lambda, this x mu) per tet; the rest of lambda goes on
+#: merged pairs (:func:`smoothed_elements`). ``benchmarks/study_locking.py`` (the linearised rung against Taylor-Hood
+#: on the held-out shapes refined once): the worst drift of the deflection from nu 0.45 to 0.499 over the four
+#: shapes is 2.3% with a cap of 10, 0.7% with 16, 0.6% with 20 and 1.3% with 25 (4.9% on pairs alone, the bunny),
+#: the worst error over nu 0.25-0.49 4.3% with each (4.8% on pairs alone). Of 16 and 20, 20: in Newton solves
+#: from a cube with a face snapped to -90% (tests/test_large_deformation.py's, structured and gmsh cubes, nu 0.49
+#: and 0.499, alpha 0.6-0.7, the default exact Hessian) 16 settled once in a folded equilibrium (one tet inverted)
+#: and failed to converge once, 20 always came back, pairs alone failed twice. 20 leaves nu <= 0.476 as it was.
+PAIR_BULK_CAP = 20.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -353,16 +365,32 @@ def network_poisson_ratio(mu_s: float, K_s: float) -> float:
 
 
 def smoothed_elements(mesh: TetMesh, tet_materials: TetMaterials, *, alpha: float | None = None,
-                      stiffness_damping: float = 0.0) -> tuple:
+                      stiffness_damping: float = 0.0, pair_bulk_cap: float = PAIR_BULK_CAP) -> tuple:
     """The smoothed rung's element sets: CorotatedTets((1 - alpha) mu), the nodal shear NodalStrain(alpha mu, 0)
-    on node domains, and the volume NodalStrain(0, lambda) on pairs of nodes (:func:`pair_nodes`)."""
+    on node domains, the volume NodalStrain(0, min(lambda, pair_bulk_cap mu)) on pairs of nodes
+    (:func:`~volspring.elements.tet_kinematics.pair_nodes`) and, where some tet's lambda is above that, a
+    NodalStrain(0, the rest of lambda) on merged pairs (:func:`~volspring.elements.tet_kinematics.merged_pairs`).
+
+    The two volume sets' bulk coefficients sum to lambda in every tet, so a uniform strain still sees exactly the
+    material's moduli (the patch test); the preconditioner's stand-in keeps min(lambda, STAND_IN_BULK_CAP mu) on
+    the pairs and nothing on the merged pairs, as with pairs alone.
+    """
     alpha = checked_alpha(alpha)
+    cap = _real_number("pair_bulk_cap", pair_bulk_cap)
+    if not cap > 0.0:
+        raise ValueError(f"pair_bulk_cap = {cap!r}: expected a number > 0 (the pairs' bulk coefficient, in units of mu)")
     mu, lam = tet_materials.shear_modulus, tet_materials.lame_lambda
+    on_pairs = np.minimum(lam, cap * mu)
     regions = tet_materials.regions
-    return (CorotatedTets(mesh.points, mesh.tets, (1.0 - alpha) * mu, stiffness_damping=stiffness_damping),
-            NodalStrain(mesh.points, mesh.tets, alpha * mu, 0.0, regions=regions, stiffness_damping=stiffness_damping),
-            NodalStrain(mesh.points, mesh.tets, 0.0, lam, regions=regions, clusters="pairs",
-                        stiffness_damping=stiffness_damping, stand_in_bulk=stand_in_bulk(lam, mu)))
+    elements = (CorotatedTets(mesh.points, mesh.tets, (1.0 - alpha) * mu, stiffness_damping=stiffness_damping),
+                NodalStrain(mesh.points, mesh.tets, alpha * mu, 0.0, regions=regions,
+                            stiffness_damping=stiffness_damping),
+                NodalStrain(mesh.points, mesh.tets, 0.0, on_pairs, regions=regions, clusters="pairs",
+                            stiffness_damping=stiffness_damping, stand_in_bulk=stand_in_bulk(lam, mu)))
+    if (lam > on_pairs).any():
+        elements += (NodalStrain(mesh.points, mesh.tets, 0.0, lam - on_pairs, regions=regions, clusters="merged pairs",
+                                 stiffness_damping=stiffness_damping, stand_in_bulk=0.0),)
+    return elements
 
 
 def stand_in_bulk(kappa: np.ndarray, mu: np.ndarray) -> np.ndarray:

@@ -27,9 +27,9 @@ The file is a compressed ``.npz`` (numpy, read without pickle), by convention na
     ``stiffness_damping`` () float64 [s], and per tet ``shear`` (T,) float64 [Pa]; a nodal strain
     set also ``bulk`` (T,) float64 [Pa], ``stand_in_bulk`` (T,) float64 [Pa] (its preconditioner's volume
     coefficient; files without it take ``bulk``) and ``regions`` (T,) int64, and ``clusters`` (n,) int64 when
-    its domains are clusters of nodes, with ``cluster_rule`` () text ``"pairs"`` when they are node pairs
-    that a scene gives to its free nodes, and ``held`` (n,) bool once it has (its per-domain coefficients and smoothing domains are rebuilt
-    from these). For angle and dihedral springs (:mod:`volspring.elements.angles`): ``chains`` (e, 3) or
+    its domains are clusters of nodes, with ``cluster_rule`` () text (``"pairs"`` or ``"merged pairs"``) when a
+    rule made them, so that a scene gives them to its free nodes, and ``held`` (n,) bool once it has (its
+    per-domain coefficients and smoothing domains are rebuilt from these). For angle and dihedral springs (:mod:`volspring.elements.angles`): ``chains`` (e, 3) or
     (e, 4) int64, ``stiffness`` (e,) float64 [N m/rad^2], ``rest_angles`` (e,) float64 [rad];
 ``has_topology`` () bool, and ``topology/NAME``
     the spring topology the model was built from, if any, in the layout of a topology file
@@ -75,6 +75,7 @@ from meshing._archive import labelled_codes, read_archive, take_array, write_arc
 from meshing.topology import SPRING_KINDS
 from meshing.topology_io import topology_arrays, topology_from_arrays
 from volspring.elements import AngleSprings, CorotatedTets, DihedralSprings, ElementSet, NodalStrain, Springs
+from volspring.elements.continuum import CLUSTER_RULES
 from volspring.elements.tet_kinematics import TetGradients
 from volspring.material import Material
 from volspring.model import Model
@@ -159,8 +160,9 @@ def _nodal_strain_from_arrays(arrays, path, prefix, rest_positions) -> NodalStra
                         stiffness_damping=damping, stand_in_bulk=stand_in)
     if prefix + "cluster_rule" in arrays:  # files before supported pairs have none: the clusters stay as stored
         rule = str(take_array(arrays, prefix + "cluster_rule", path, shape=(), kind="U"))
-        if rule != "pairs" or clusters is None:
-            raise ValueError(f"{path} is damaged: {prefix}cluster_rule = {rule!r}; expected 'pairs', with clusters")
+        if rule not in CLUSTER_RULES or clusters is None:
+            raise ValueError(f"{path} is damaged: {prefix}cluster_rule = {rule!r}; expected one of "
+                             f"{', '.join(map(repr, CLUSTER_RULES))}, with clusters")
         nodal.cluster_rule = rule
     return nodal
 

@@ -43,8 +43,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring.elements.base import BlockMap, ElementSet, Linearization, OperatorLinearization
-from volspring.elements.tet_kinematics import (SmoothingDomains, TetGradients, corotated, corotational, pair_nodes,
-                                              sparse_layout, twist_directions, twist_rows)
+from volspring.elements.tet_kinematics import (SmoothingDomains, TetGradients, corotated, corotational,
+                                              merged_pairs, pair_nodes, sparse_layout, twist_directions, twist_rows)
 from volspring.material import _real_array, _real_number
 from volspring.kernels import compiled, unsigned
 from typing import TYPE_CHECKING, Self
@@ -52,7 +52,10 @@ from typing import TYPE_CHECKING, Self
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ["CorotatedTets", "NodalStrain"]
+__all__ = ["CLUSTER_RULES", "CorotatedTets", "NodalStrain"]
+
+#: The rules a NodalStrain's ``clusters`` may be named by: name -> (rest positions, tets) -> a label per node.
+CLUSTER_RULES = {"pairs": pair_nodes, "merged pairs": merged_pairs}
 
 
 def _per_tet(name, value, count, *, allow_zero=True) -> np.ndarray:
@@ -327,10 +330,11 @@ class NodalStrain(_TetContinuum):
     regions : (T,) int, optional
         material region of each tet; domains never cross regions, and every tet of one region must have the same
         ``shear`` and ``bulk``
-    clusters : (n,) int or "pairs", optional
+    clusters : (n,) int, "pairs" or "merged pairs", optional
         a cluster label per node: each domain is then a cluster of nodes and the tets around them; ``"pairs"``: the
-        pairs of :func:`~volspring.elements.tet_kinematics.pair_nodes`, whose domains a scene gives to the free nodes
-        (:meth:`supported`); default one domain per node
+        pairs of :func:`~volspring.elements.tet_kinematics.pair_nodes`, ``"merged pairs"``: those pairs with the ones
+        that have no interior node merged into a neighbour (:func:`~volspring.elements.tet_kinematics.merged_pairs`);
+        a scene gives the domains of either rule to the free nodes (:meth:`supported`); default one domain per node
     held : (n,) bool, optional
         nodes held in place: the domains are the free nodes' (a tet's volume is shared among its free corners;
         :class:`~volspring.elements.tet_kinematics.SmoothingDomains`)
@@ -375,13 +379,14 @@ class NodalStrain(_TetContinuum):
             if regions.shape != (T,) or regions.dtype.kind not in "iu" or (T and regions.min() < 0):
                 raise ValueError(f"regions must be ({T},) integers >= 0, one per tet; got shape {regions.shape}, "
                                  f"dtype {regions.dtype}")
-        #: "pairs" when the clusters are pair_nodes' (and follow the supports), else None.
+        #: The rule that made the clusters ("pairs" or "merged pairs": they follow the supports), else None.
         self.cluster_rule = None
         if isinstance(clusters, str):
-            if clusters != "pairs":
-                raise ValueError(f"clusters = {clusters!r}: expected 'pairs' or a cluster label per node")
-            self.cluster_rule = "pairs"
-            clusters = pair_nodes(rest, self.kinematics.tets)
+            if clusters not in CLUSTER_RULES:
+                raise ValueError(f"clusters = {clusters!r}: expected one of {', '.join(map(repr, CLUSTER_RULES))} or a "
+                                 "cluster label per node")
+            self.cluster_rule = clusters
+            clusters = CLUSTER_RULES[clusters](rest, self.kinematics.tets)
         if clusters is not None:
             clusters = np.asarray(clusters)
             if clusters.shape != (self.node_count,) or clusters.dtype.kind not in "iu" or \
@@ -672,15 +677,16 @@ class NodalStrain(_TetContinuum):
         return self._with(rest_positions, node_map[self.kinematics.tets], clusters, held)
 
     def supported(self, held: ArrayLike) -> "NodalStrain":
-        """With ``clusters="pairs"``, the set whose domains are the free nodes' when the supports hold the nodes
-        ``held`` ((n,) bool; those of a set of other nodes need not be held); any other set is itself.
+        """With clusters made by a rule (``"pairs"``, ``"merged pairs"``), the set whose domains are the free nodes'
+        when the supports hold the nodes ``held`` ((n,) bool; those of a set of other nodes need not be held); any
+        other set is itself.
 
         Measured (``benchmarks/study_locking.py``, deflection against Taylor-Hood on the same mesh from nu
         0.45 to 0.499): a clamped capsule's fell 7.8% with plain pairs, 2.5% with the free nodes' domains.
         """
         held = np.asarray(held, dtype=bool)[:self.node_count]
         held = held if held.any() else None
-        if self.cluster_rule != "pairs" or (held is None and self.held is None) or \
+        if self.cluster_rule is None or (held is None and self.held is None) or \
                 (held is not None and self.held is not None and np.array_equal(held, self.held)):
             return self
         return self._with(self.rest_positions, self.kinematics.tets, self.clusters, held)

@@ -31,8 +31,8 @@ from volspring.kernels import compiled
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
 
-__all__ = ["SmoothingDomains", "TetGradients", "corotated", "corotational", "domain_pairs", "pair_nodes",
-           "rotation_preserving_svd", "twist_directions", "twist_rows"]
+__all__ = ["SmoothingDomains", "TetGradients", "corotated", "corotational", "domain_pairs", "merged_pairs",
+           "pair_nodes", "rotation_preserving_svd", "twist_directions", "twist_rows"]
 
 _TWIST_PAIRS = ((0, 1), (0, 2), (1, 2))
 
@@ -481,6 +481,39 @@ def pair_nodes(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
         label[left[has]] = label[neighbour]
         label[left[~has]] = left[~has]  # a node on no tet: its own cluster
     return label
+
+
+def merged_pairs(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
+    """(n,) int -- the clusters of :func:`pair_nodes`, each one without an interior node merged into a neighbouring
+    cluster that has one (the lowest label among them; a cluster with no such neighbour stays as it is).
+
+    Why: the smoothed rung puts the part of lambda above a few mu on these coarser domains
+    (:func:`volspring.ladder.smoothed_elements`). A pair whose nodes are all on the surface constrains the volume
+    of a thin layer that a P1 displacement cannot keep without bending stiffly, so on coarse meshes of thin parts
+    (the bunny's ears) pairs lock a few percent as nu -> 1/2; merged into a neighbour with an interior node they
+    do not (``benchmarks/study_locking.py``).
+    """
+    from meshing.mesh import TET_FACES
+
+    tets = np.asarray(tets, dtype=np.int64)
+    label = pair_nodes(points, tets)
+    n = len(label)
+    faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1)
+    _, inverse, counts = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
+    surface = np.zeros(n, dtype=bool)
+    surface[faces[counts[inverse.ravel()] == 1].ravel()] = True
+    interior = np.zeros(n, dtype=bool)  # per cluster label (a cluster's label is one of its nodes)
+    np.logical_or.at(interior, label, ~surface)
+    corners = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
+    edges = np.unique(np.sort(tets[:, corners].reshape(-1, 2), axis=1), axis=0)
+    a, b = label[edges].T
+    none = np.iinfo(np.int64).max
+    target = np.full(n, none)
+    for x, y in ((a, b), (b, a)):
+        joins = (x != y) & ~interior[x] & interior[y]
+        np.minimum.at(target, x[joins], y[joins])
+    moved = target[label] < none
+    return np.where(moved, target[label], label)
 
 
 def domain_pairs(counts: np.ndarray) -> tuple:
