@@ -216,22 +216,28 @@ def test_materials_per_region_on_every_rung(cube):
         Model.from_mesh(cube, soft, regions=regions, materials={7: hard})
 
 
-def test_smoothed_frequencies_match_p2_without_spurious_modes():
-    """The first ten free-vibration frequencies of a clamped beam against P2 on the same mesh."""
+@pytest.mark.parametrize("nu", [0.3, 0.49])
+def test_smoothed_frequencies_match_p2_without_spurious_modes(nu):
+    """The first ten free-vibration frequencies of a clamped beam against P2 on the same mesh; at nu 0.49 with
+    lambda above PAIR_BULK_CAP mu on merged pairs, whose coarser domains must not bring soft modes."""
     from validation.cases import cantilever_modes
     from validation.fem import solve_fem_modes
     from validation.springs import held_nodes, spring_frequencies
 
     case = cantilever_modes(per_height=2, count=10)
-    reference = solve_fem_modes(case.mesh, case.material_tuple, clamp=list(case.clamps), count=10)
-    model = Model.from_mesh(case.mesh, case.material, model="smoothed")
+    material = Material(E=case.material.E, nu=nu, density=case.material.density)
+    reference = solve_fem_modes(case.mesh, (material.E, nu, material.density), clamp=list(case.clamps), count=10)
+    model = Model.from_mesh(case.mesh, material, model="smoothed")
+    assert len(model.elements) == (4 if nu == 0.49 else 3)
     frequencies, _ = spring_frequencies(model, held_nodes(case), count=10)
     ratio = frequencies / reference.frequencies
     print("smoothed / P2 frequencies:", np.round(ratio, 4))
-    # No spurious low modes: every frequency within the band the discretisation error allows;
-    # measured 0.95-1.01 on this 20 x 2 x 2 beam with the volume on node pairs (0.99-1.06 on single nodes).
+    # No spurious low modes: every frequency within the band the discretisation error allows; measured 0.95-1.01
+    # on this 20 x 2 x 2 beam at nu 0.3 with the volume on node pairs (0.99-1.06 on single nodes), 0.94-0.99 at
+    # 0.49 (0.94-1.00 with all of lambda on pairs; same-mesh P2 is itself about 1% stiff there, study_locking.py).
     assert ratio.min() > 0.9 and ratio.max() < 1.15
-    # The issue's goal for the first three: within 3% (measured 0.998, 1.008, 0.989).
+    # The issue's goal for the first three: within 3% (measured 0.996, 1.008, 0.987 at nu 0.3; 0.981, 0.994,
+    # 0.975 at 0.49).
     assert np.abs(ratio[:3] - 1).max() < 0.03
 
 
