@@ -372,8 +372,8 @@ def test_neo_hookean_p2_is_linear_p2_at_a_small_load(cantilever):
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="since the scene gives the clamped nodes' volume domains to their free "
                    "neighbours (1683b51, issue 11), the smoothed rung's linear tip moves along the beam by 3.4e-4 "
-                   "(nu 0.45) and 4.6e-4 (0.49; 5.3e-4 before lambda above 20 mu went on merged pairs) of its deflection "
-                   "on this structured mesh (bound 1e-4: the mirrored cells' pattern at the clamp is not symmetric "
+                   "(nu 0.45) and 4.6e-4 (0.49; 5.3e-4 before lambda above 20 mu went on merged pairs) of its "
+                   "deflection on this structured mesh (bound 1e-4: the mirrored cells' pattern at the clamp is not symmetric "
                    "about the mid-plane), and its shortening per squared deflection is 1.06% and 1.42% (1.53%) from "
                    "P2's (bound 1%; 0.47% and 0.66% before 1683b51); the "
                    "unstructured beam passes. Open in issue 11")

@@ -104,8 +104,8 @@ if TYPE_CHECKING:
     from meshing.mesh import TetMesh
     from volspring.elements.springs import Springs
 
-__all__ = ["DEFAULT_ALPHA", "MODELS", "PAIR_BULK_CAP", "STAND_IN_BULK_CAP", "TetMaterials", "network_moduli", "network_poisson_ratio",
-           "smoothed_elements", "stand_in_bulk", "volume_rung_moduli"]
+__all__ = ["DEFAULT_ALPHA", "MODELS", "PAIR_BULK_CAP", "STAND_IN_BULK_CAP", "TetMaterials", "network_moduli",
+           "network_poisson_ratio", "smoothed_elements", "stand_in_bulk", "volume_rung_moduli"]
 
 MODELS = ("springs", "springs+volume", "smoothed")
 #: Weight of the nodal (smoothed) shear in the smoothed rung: the minimax of benchmarks/study_alpha.py over the
@@ -378,7 +378,8 @@ def smoothed_elements(mesh: TetMesh, tet_materials: TetMaterials, *, alpha: floa
     alpha = checked_alpha(alpha)
     cap = _real_number("pair_bulk_cap", pair_bulk_cap)
     if not cap > 0.0:
-        raise ValueError(f"pair_bulk_cap = {cap!r}: expected a number > 0 (the pairs' bulk coefficient, in units of mu)")
+        raise ValueError(f"pair_bulk_cap = {cap!r}: expected a number > 0 (the pairs' bulk coefficient in units of "
+                         "mu)")
     mu, lam = tet_materials.shear_modulus, tet_materials.lame_lambda
     on_pairs = np.minimum(lam, cap * mu)
     regions = tet_materials.regions

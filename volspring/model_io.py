@@ -29,8 +29,8 @@ The file is a compressed ``.npz`` (numpy, read without pickle), by convention na
     coefficient; files without it take ``bulk``) and ``regions`` (T,) int64, and ``clusters`` (n,) int64 when
     its domains are clusters of nodes, with ``cluster_rule`` () text (``"pairs"`` or ``"merged pairs"``) when a
     rule made them, so that a scene gives them to its free nodes, and ``held`` (n,) bool once it has (its
-    per-domain coefficients and smoothing domains are rebuilt from these). For angle and dihedral springs (:mod:`volspring.elements.angles`): ``chains`` (e, 3) or
-    (e, 4) int64, ``stiffness`` (e,) float64 [N m/rad^2], ``rest_angles`` (e,) float64 [rad];
+    per-domain coefficients and smoothing domains are rebuilt from these). For angle and dihedral springs
+    (:mod:`volspring.elements.angles`): ``chains`` (e, 3) or (e, 4) int64, ``stiffness`` (e,) float64 [N m/rad^2], ``rest_angles`` (e,) float64 [rad];
 ``has_topology`` () bool, and ``topology/NAME``
     the spring topology the model was built from, if any, in the layout of a topology file
     (:mod:`meshing.topology_io`: points, mesh_node_count, tets, springs, kinds, shell data).

@@ -109,7 +109,8 @@ class OperatorLinearization(Linearization):
         c_K + c_D b: the product's factor in the system (Rayleigh damping C = b K)
     element_set : ElementSet
     preconditioner : callable
-        ``preconditioner() -> (e, b, 3, 3)`` stand-in blocks, already scaled
+        ``preconditioner() -> (e, b, 3, 3)`` stand-in blocks, already scaled, or None when the set adds nothing to
+        the stand-in
     times_many : callable, optional
         ``times_many(U) -> K U`` for (n, 3, k) U, each column the bits of ``times`` (the sparse factors read once
         for all k); default ``times`` column by column
@@ -140,7 +141,8 @@ class OperatorLinearization(Linearization):
         factors again)."""
         return self.scale * np.stack([self._times(np.ascontiguousarray(U[:, :, j])) for j in range(U.shape[2])], axis=2)
 
-    def preconditioner_blocks(self) -> np.ndarray:
+    def preconditioner_blocks(self) -> np.ndarray | None:
+        """The set's stand-in blocks for the preconditioner, already scaled (None: it adds nothing to the stand-in)."""
         if self._preconditioner is None:
             raise ValueError("this linearization was built without a preconditioner (no stand-in blocks)")
         return self._preconditioner()

@@ -103,8 +103,9 @@ class _TetContinuum(ElementSet):
     stiffness_damping: float  # Rayleigh b [s]
 
     @abstractmethod
-    def preconditioner_blocks(self, x: np.ndarray) -> np.ndarray:
-        """(T, 16, 3, 3) -- per tet, stand-in blocks of the stiffness at x to build a preconditioner from."""
+    def preconditioner_blocks(self, x: np.ndarray) -> np.ndarray | None:
+        """(T, 16, 3, 3) -- per tet, stand-in blocks of the stiffness at x to build a preconditioner from; None when
+        the set has none (a stand-in of zeros)."""
 
     @property
     def preconditioner_stencil(self) -> np.ndarray:
@@ -122,8 +123,11 @@ class _TetContinuum(ElementSet):
 
     def _operator(self, forces, times, x, stiffness_scale, damping_scale, times_many=None) -> OperatorLinearization:
         scale = self._scale(stiffness_scale, damping_scale)
-        return OperatorLinearization(forces, times, scale, self, lambda: scale * self.preconditioner_blocks(x),
-                                     times_many)
+        def preconditioner():
+            blocks = self.preconditioner_blocks(x)
+            return None if blocks is None else scale * blocks
+
+        return OperatorLinearization(forces, times, scale, self, preconditioner, times_many)
 
     def with_stiffness_damping(self, b: float) -> Self:
         """A copy with Rayleigh stiffness damping b [s] (the kinematics and domains are shared)."""
@@ -610,8 +614,9 @@ class NodalStrain(_TetContinuum):
         corner = self.domains.corner_domain[:, 0]
         return CorotatedTets.from_kinematics(self.kinematics, self.node_count, self.shear[corner])
 
-    def preconditioner_blocks(self, x: np.ndarray) -> np.ndarray:
-        """(T, 16, 3, 3) -- a 1-ring stand-in for the projected stiffness, to build a preconditioner from.
+    def preconditioner_blocks(self, x: np.ndarray) -> np.ndarray | None:
+        """(T, 16, 3, 3) -- a 1-ring stand-in for the projected stiffness, to build a preconditioner from (None for a
+        set with neither shear nor stand-in bulk).
 
         Per tet, the corotated shear ``V_t mu |F_t - R_t|^2`` and the Gauss-Newton part of a per-tet
         volume term ``(c kappa_s / 2) V_t (J_t - 1)^2`` (c = :attr:`PRECONDITIONER_BULK`), with the
@@ -631,6 +636,8 @@ class NodalStrain(_TetContinuum):
         """
         x = np.asarray(x, dtype=np.float64)
         tets, bulk = self._tet_shear, self.stand_in_bulk
+        if not (tets.shear.any() or bulk.any()):
+            return None  # the smoothed rung's merged pairs: the pairs' stand-in stands in for both
         blocks = tets.stiffness_blocks(x) if tets.shear.any() else np.zeros((len(bulk), 16, 3, 3))
         if bulk.any():
             state = {"cof": _cofactor(self.kinematics.deformation(x))}
