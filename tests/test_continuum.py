@@ -458,6 +458,13 @@ def test_above_the_pair_cap_lambda_is_split_onto_merged_pairs_that_follow_the_su
     assert np.array_equal(loaded.forces(x), scene.model.forces(x))
     # Below the cap (nu 0.47: lambda = 15.7 mu) the rung is the three sets it always was.
     assert len(Model.from_mesh(irregular, Material(E=1e6, nu=0.47, density=1000.0), model="smoothed").elements) == 3
+    from volspring.ladder import TetMaterials, smoothed_elements
+
+    materials = TetMaterials.of(len(irregular.tets), material)
+    assert len(smoothed_elements(irregular, materials, pair_bulk_cap=np.inf)) == 3  # all of lambda on the pairs
+    for bad in (0.0, -1.0, np.nan):
+        with pytest.raises(ValueError, match="pair_bulk_cap"):
+            smoothed_elements(irregular, materials, pair_bulk_cap=bad)
 
 
 def test_the_stand_in_bulk_changes_the_preconditioner_only(irregular):

@@ -373,7 +373,8 @@ def smoothed_elements(mesh: TetMesh, tet_materials: TetMaterials, *, alpha: floa
 
     The two volume sets' bulk coefficients sum to lambda in every tet, so a uniform strain still sees exactly the
     material's moduli (the patch test); the preconditioner's stand-in keeps min(lambda, STAND_IN_BULK_CAP mu) on
-    the pairs and nothing on the merged pairs, as with pairs alone.
+    the pairs and nothing on the merged pairs, as with pairs alone. ``pair_bulk_cap`` (in units of mu, > 0; default
+    :data:`PAIR_BULK_CAP`) is for studies: ``np.inf`` puts all of lambda on the pairs (the rung before merged pairs).
     """
     alpha = checked_alpha(alpha)
     cap = _real_number("pair_bulk_cap", pair_bulk_cap)

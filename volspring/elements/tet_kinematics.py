@@ -487,11 +487,10 @@ def merged_pairs(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
     """(n,) int -- the clusters of :func:`pair_nodes`, each one without an interior node merged into a neighbouring
     cluster that has one (the lowest label among them; a cluster with no such neighbour stays as it is).
 
-    Why: the smoothed rung puts the part of lambda above a few mu on these coarser domains
-    (:func:`volspring.ladder.smoothed_elements`). A pair whose nodes are all on the surface constrains the volume
-    of a thin layer that a P1 displacement cannot keep without bending stiffly, so on coarse meshes of thin parts
-    (the bunny's ears) pairs lock a few percent as nu -> 1/2; merged into a neighbour with an interior node they
-    do not (``benchmarks/study_locking.py``).
+    Why: the smoothed rung puts the part of lambda above :data:`volspring.ladder.PAIR_BULK_CAP` mu on these
+    coarser domains (:func:`volspring.ladder.smoothed_elements`). With all of lambda on pairs, the coarse bunny's
+    deflection fell 5% from nu 0.45 to 0.499 (volume locking); with the part above the cap on merged pairs it
+    moves by less than 1% on every held-out shape (``benchmarks/study_locking.py``).
     """
     from meshing.mesh import TET_FACES
 
