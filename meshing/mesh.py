@@ -18,7 +18,7 @@ import numpy as np
 
 # _used_nodes is re-exported for meshing.mesh_io.
 from meshing.mesh_orientation import (TET_EDGES, TET_FACES, _compact_arrays, _oriented_arrays,  # noqa: F401
-                                      _used_nodes, _volumes_and_extents)
+                                      _used_nodes, _volumes_and_extents, boundary_face_mask, tet_edges)
 from meshing.tolerances import ZERO_VOLUME
 from collections.abc import Mapping
 import os
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     import meshio
     from numpy.typing import ArrayLike
 
-__all__ = ["TET_EDGES", "TET_FACES", "TetMesh"]
+__all__ = ["TET_EDGES", "TET_FACES", "TetMesh", "boundary_face_mask", "tet_edges"]
 
 @dataclass(frozen=True, eq=False)
 class TetMesh:
@@ -211,7 +211,7 @@ class TetMesh:
     @cached_property
     def edges(self) -> np.ndarray:
         """(e, 2) int64 -- each unique tet edge once, as (i, j) with i < j, sorted."""
-        return np.ascontiguousarray(np.unique(self._tet_edge_pairs(), axis=0))
+        return np.ascontiguousarray(tet_edges(self.tets))
 
     @property
     def tet_edge_index(self) -> np.ndarray:

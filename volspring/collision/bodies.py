@@ -11,7 +11,7 @@ from functools import cached_property
 
 import numpy as np
 
-from meshing.mesh import TET_EDGES, TET_FACES, TetMesh
+from meshing.mesh import TET_EDGES, TET_FACES, TetMesh, boundary_face_mask
 from typing import TYPE_CHECKING, cast
 
 if TYPE_CHECKING:
@@ -185,9 +185,7 @@ class CollisionBodies:
     def tet_face_on_boundary(self) -> np.ndarray:
         """(M, 4) bool -- whether face k of each tet (``meshing.mesh.TET_FACES[k]``, outward wound for a
         positively oriented tet) is a boundary face."""
-        faces = np.sort(self.tets[:, TET_FACES].reshape(-1, 3), axis=1)
-        _, inverse, counts = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
-        return _frozen((counts[inverse.ravel()] == 1).reshape(-1, 4))
+        return _frozen(boundary_face_mask(self.tets))
 
     @cached_property
     def tet_edge_on_boundary(self) -> np.ndarray:

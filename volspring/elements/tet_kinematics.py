@@ -26,6 +26,7 @@ from functools import cached_property
 import numpy as np
 from typing import TYPE_CHECKING
 
+from meshing.mesh import TET_FACES, boundary_face_mask, tet_edges
 from volspring.kernels import compiled
 
 if TYPE_CHECKING:
@@ -451,8 +452,7 @@ def pair_nodes(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
     points = np.asarray(points, dtype=np.float64)
     tets = np.asarray(tets, dtype=np.int64)
     n = len(points)
-    corners = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
-    edges = np.unique(np.sort(tets[:, corners].reshape(-1, 2), axis=1), axis=0)
+    edges = tet_edges(tets)
     lengths = np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1)
     order = np.lexsort((np.arange(len(edges)), lengths))  # shortest first, ties by edge index
     edges = edges[order]
@@ -492,20 +492,14 @@ def merged_pairs(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
     deflection fell 5% from nu 0.45 to 0.499 (volume locking); with the part above the cap on merged pairs it
     moves by less than 1% on every held-out shape (``benchmarks/study_locking.py``).
     """
-    from meshing.mesh import TET_FACES
-
     tets = np.asarray(tets, dtype=np.int64)
     label = pair_nodes(points, tets)
     n = len(label)
-    faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1)
-    _, inverse, counts = np.unique(faces, axis=0, return_inverse=True, return_counts=True)
     surface = np.zeros(n, dtype=bool)
-    surface[faces[counts[inverse.ravel()] == 1].ravel()] = True
+    surface[tets[:, TET_FACES][boundary_face_mask(tets)].ravel()] = True
     interior = np.zeros(n, dtype=bool)  # per cluster label (a cluster's label is one of its nodes)
     np.logical_or.at(interior, label, ~surface)
-    corners = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
-    edges = np.unique(np.sort(tets[:, corners].reshape(-1, 2), axis=1), axis=0)
-    a, b = label[edges].T
+    a, b = label[tet_edges(tets)].T
     none = np.iinfo(np.int64).max
     target = np.full(n, none)
     for x, y in ((a, b), (b, a)):
