@@ -44,6 +44,21 @@ def test_edges_are_unique_and_indexed_from_tets():
     assert all(not isinstance(value, tuple) for value in vars(mesh).values())
 
 
+def test_raw_array_edges_and_boundary_faces_agree_with_the_mesh():
+    """meshing.mesh.tet_edges and boundary_face_mask on bare arrays: the mesh's edges, and its boundary faces."""
+    from meshing.mesh import TET_FACES, boundary_face_mask, tet_edges
+
+    mesh = cube_mesh((3, 2, 2))
+    assert np.array_equal(tet_edges(mesh.tets), mesh.edges)
+    mask = boundary_face_mask(mesh.tets)
+    faces = mesh.tets[:, TET_FACES][mask]
+    as_set = [np.unique(np.sort(f, axis=1), axis=0) for f in (faces, mesh.boundary_faces)]
+    assert len(faces) == len(mesh.boundary_faces) and np.array_equal(*as_set)
+    # Two tets sharing a face: each has three boundary faces and the shared one inside.
+    two = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])
+    assert boundary_face_mask(two).sum(axis=1).tolist() == [3, 3] and len(tet_edges(two)) == 9
+
+
 def test_node_volumes_sum_to_total():
     mesh = cube_mesh()
     assert mesh.node_volumes().sum() == pytest.approx(mesh.volume, rel=1e-14)
