@@ -18,6 +18,10 @@ import numpy as np
 
 from meshing.geometry import signed_tet_volumes
 from meshing.tolerances import LARGEST_COORDINATE, SMALLEST_EXTENT, ZERO_VOLUME
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike
 
 __all__ = ["TET_EDGES", "TET_FACES", "boundary_face_mask", "tet_edges"]
 
@@ -31,13 +35,13 @@ TET_EDGES = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
 TET_FACES = np.array([[1, 2, 3], [0, 3, 2], [0, 1, 3], [0, 2, 1]])
 
 
-def tet_edges(tets) -> np.ndarray:
+def tet_edges(tets: ArrayLike) -> np.ndarray:
     """(e, 2) int64 -- every edge of the (m, 4) ``tets`` once, as (i, j) with i < j, sorted."""
     tets = np.asarray(tets, dtype=np.int64)
     return np.unique(np.sort(tets[:, TET_EDGES].reshape(-1, 2), axis=1), axis=0)
 
 
-def boundary_face_mask(tets) -> np.ndarray:
+def boundary_face_mask(tets: ArrayLike) -> np.ndarray:
     """(m, 4) bool -- whether face k of each tet (``TET_FACES[k]``) belongs to that tet only: the boundary."""
     tets = np.asarray(tets, dtype=np.int64)
     faces = np.sort(tets[:, TET_FACES].reshape(-1, 3), axis=1)
