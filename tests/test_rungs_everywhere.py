@@ -459,7 +459,7 @@ def test_a_topology_file_with_shells_runs_with_volume_and_is_refused_by_the_smoo
 
 def test_a_smoothed_contact_step_reuses_the_stand_in_of_the_hierarchy(monkeypatch):
     """With the continuum sets applied as products, their stand-in blocks (a linearisation of their own) are
-    computed when the AMG hierarchy is built, not again at each contact step's refresh; the steps still solve
+    computed when the AMG hierarchy is built, not again at each contact step's update of it; the steps still solve
     to the asked residual."""
     from volspring.elements import CorotatedTets
     from volspring.integrators.implicit import ImplicitEuler
@@ -483,5 +483,5 @@ def test_a_smoothed_contact_step_reuses_the_stand_in_of_the_hierarchy(monkeypatc
         assert integrator.last_solve.residual <= 1e-6
     assert contact_steps >= 3  # the cube hits the block within the first steps
     # One CorotatedTets set (the two bodies' meshes are one mesh here): one stand-in evaluation per build, none
-    # per contact refresh (there were contact_steps of them).
+    # per contact step's update (there were contact_steps of them).
     assert len(calls) == builds < contact_steps

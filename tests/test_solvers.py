@@ -173,6 +173,70 @@ def test_restore_puts_the_built_matrix_back_after_a_refresh(system, rhs, smoothe
     assert pickle.loads(pickle.dumps(solver)).precondition(rhs).tobytes() == built.tobytes()
 
 
+def _level_dense(matrix) -> np.ndarray:
+    """A level's matrix as a dense array: triangles (whose halves share the diagonal, or its blocks) or sparse."""
+    if not isinstance(matrix, _Triangles):
+        return matrix.toarray()
+    lower, upper = matrix.lower.toarray().astype(np.float64), matrix.upper.toarray().astype(np.float64)
+    size = 1 if matrix.inverse is None else matrix.blocksize[0]
+    shared = np.kron(np.eye(lower.shape[0] // size), np.ones((size, size)))
+    return lower + upper - lower * shared
+
+
+@pytest.mark.parametrize("smoother", SMOOTHERS)
+def test_update_gives_the_levels_above_the_coarsest_the_change_and_restore_takes_it_back(system, rhs, smoother):
+    """update(C) (contact's change since the build): the finest level holds the built matrix plus C, the first coarse
+    level its own plus P^T C P with the built P, the coarsest its own (UPDATE_DEPTH = 2: its factorisation would
+    cost as much as the rest). A second update replaces the first; restore() and a pickle taken during an update
+    give the build's preconditioner bit for bit (what a resumed run has)."""
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient(smoother=smoother, max_coarse=20)
+    solver.build(matrix, modes)
+    levels = solver.hierarchy.levels
+    assert len(levels) == 3 and amg.UPDATE_DEPTH == 2
+    built = [_level_dense(level.A) for level in levels]
+    coarsest, before = levels[2].A, solver.precondition(rhs)
+    change = _contact_like_change(matrix.shape[0], np.random.default_rng(8))
+    solver.update(2.0 * change)
+    solver.update(change)
+    fine, first = _level_dense(levels[0].A), _level_dense(levels[1].A)
+    # The finest level in single precision with the default smoother (unit round-off 6e-8 of entries of order 50).
+    rounding = 1e-6 if smoother == "gauss_seidel" else 1e-12
+    assert np.abs(fine - (built[0] + change.toarray())).max() <= rounding * np.abs(built[0]).max()
+    P = levels[0].P.toarray().astype(np.float64)
+    expected = built[1] + P.T @ change.toarray() @ P
+    # The same products summed in another order: rounding of double precision.
+    assert np.abs(first - expected).max() <= 1e-12 * np.abs(expected).max()
+    assert np.abs(P.T @ change.toarray() @ P).max() > 1e-3 * np.abs(built[1]).max()  # the change is seen there
+    assert levels[2].A is coarsest
+    updated = solver.precondition(rhs)
+    assert not np.array_equal(updated, before)
+    assert pickle.loads(pickle.dumps(solver)).precondition(rhs).tobytes() == before.tobytes()
+    solver.restore()
+    assert solver.precondition(rhs).tobytes() == before.tobytes()
+    assert all(np.array_equal(_level_dense(level.A), dense) for level, dense in zip(levels, built))
+    # A refresh after an update starts from the built levels too.
+    solver.update(change)
+    solver.refresh(matrix)
+    assert np.array_equal(_level_dense(levels[1].A), built[1])
+
+
+def test_an_update_beyond_single_precision_holds_the_finest_level_in_double(system, rhs):
+    """The finest level's triangles are single precision within SINGLE_PRECISION_RANGE; a change beyond it (a
+    contact stiffness 1e20 times the matrix's) is added in double, not rounded to infinity."""
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient()
+    solver.build(matrix, modes)
+    change = 1e20 * _contact_like_change(matrix.shape[0], np.random.default_rng(8))
+    assert np.abs(change.data).max() > amg.SINGLE_PRECISION_RANGE
+    solver.update(change)
+    finest = solver.hierarchy.levels[0].A
+    assert finest.dtype == np.float64 and finest.lower.dtype == np.float64
+    expected = matrix.astype(np.float32).toarray().astype(np.float64) + change.toarray()
+    assert np.abs(_level_dense(finest) - expected).max() <= 1e-15 * np.abs(expected).max()
+    assert np.isfinite(solver.precondition(rhs)).all()
+
+
 def _contact_like_change(size, rng):
     """(size, size) CSR: a symmetric positive semi-definite coupling of two 3-unknown nodes far apart, as contact
     adds (k (u_a - u_b)(u_a - u_b)^T along a random direction), with a stiffness near the matrix's diagonal."""

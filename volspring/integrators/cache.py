@@ -44,20 +44,20 @@ class SolverCache:
         (pattern, step, t, dt, x, v) the current hierarchy was built from
     matrix_free : bool
         patterns apply the sets that offer it as products (:class:`BlockPattern`)
-    stand_in : sparse matrix or None
-        the preconditioning matrix of the last build when sets are applied as products (their stand-in blocks; rebuilt
-        with the hierarchy, not pickled)
     folded : (f, 3) float or None
         the scene forces' diagonal Jacobian term folded into the matrix at the last build (None without one; rebuilt
-        with the hierarchy, not pickled): a step whose term differs refreshes the hierarchy's finest level
+        with the hierarchy, not pickled): a step whose term differs updates the hierarchy's levels
+    extra : sparse matrix or None
+        the scene forces' other Jacobian terms (contact between bodies) over the free unknowns at the last build (None
+        without; rebuilt with the hierarchy, not pickled): the hierarchy's levels get their change at each step
     """
 
     solver: _LinearSolver
     pattern: BlockPattern | None = None
     record: tuple | None = None
     matrix_free: bool = False
-    stand_in: object = None
     folded: np.ndarray | None = None
+    extra: object = None
 
     def pattern_for(self, scene: Scene) -> BlockPattern:
         """The block pattern of ``scene``'s model and free nodes: kept while they are the same, else rebuilt
@@ -65,7 +65,7 @@ class SolverCache:
         cached = self.pattern
         if cached is None or cached.model is not scene.model or not np.array_equal(cached.free, scene.free):
             cached = self.pattern = BlockPattern(scene.model, scene.free, matrix_free=self.matrix_free)
-            self.record = self.stand_in = self.folded = None
+            self.record = self.folded = self.extra = None
         return cached
 
     def built(self, pattern: BlockPattern, step: int, t: float, dt: float, x: np.ndarray, v: np.ndarray) -> None:
@@ -84,5 +84,5 @@ class SolverCache:
         solver = copy.copy(self.solver)
         if getattr(solver, "hierarchy", None) is not None:
             setattr(solver, "hierarchy", None)  # a solver with a hierarchy (AMG's): not pickled
-        return {"solver": solver, "pattern": None, "record": None, "matrix_free": self.matrix_free, "stand_in": None,
-                "folded": None}
+        return {"solver": solver, "pattern": None, "record": None, "matrix_free": self.matrix_free, "folded": None,
+                "extra": None}

@@ -395,10 +395,9 @@ class ImplicitEuler(Integrator):
         seconds = cache.solver.build(system.whole, rigid_body_modes(x[pattern.free_nodes]),
                                      aggregation=None if system.extra is None else system.stand_in)
         cache.built(pattern, step, t, dt, x, v)
-        # The stand-in blocks of sets applied as products cost a linearisation of their own: kept from the build
-        # for the contact refreshes of the steps that reuse this hierarchy (_solve).
-        cache.stand_in = system.stand_in if system.operator is not None else None
-        cache.folded = system.folded
+        # What the scene forces' Jacobian was at the build: the steps that reuse the hierarchy give it their change
+        # (_solve; the stand-in blocks of sets applied as products, a linearisation of their own, stay the build's).
+        cache.folded, cache.extra = system.folded, system.extra
         return seconds
 
     # ------------------------------------------------------------------ the step
@@ -509,29 +508,39 @@ class ImplicitEuler(Integrator):
         """The step's velocity change and the solve's info; ``guess``: (x0, b - A x0) or None (from zero)."""
         warm, residual = guess if guess is not None else (None, None)
         if self.method == "amg":
-            # Contact changes from step to step: the fine level of the kept hierarchy gets the current
-            # system, contact included (AMGConjugateGradient.refresh), the coarse levels stay; so does a diagonal
-            # term (a rigid obstacle's contact) that differs from the build's. With sets applied as products, their
-            # stand-in blocks are those of the hierarchy's build. Otherwise the finest level is the built matrix
-            # (restore), so that a step's preconditioner depends on the build and the step only, as in a resumed run.
-            folded = system.folded if system.folded is not None else 0.0
-            built = cache.folded if cache.folded is not None else 0.0
-            if system.extra is not None or not np.array_equal(folded, built):
-                if system.operator is not None and cache.stand_in is not None:
-                    stand_in = sp.csr_matrix(cache.stand_in)
-                    if system.extra is not None:
-                        stand_in = stand_in + system.extra
-                    change = np.broadcast_to(np.subtract(folded, built), (len(b) // 3, 3)).ravel()
-                    if system.held is not None:  # eliminated rows stay identity rows
-                        change = np.where(system.held, 0.0, change)
-                    if change.any():
-                        stand_in = stand_in + sp.diags(change)
-                    cache.solver.refresh(sp.bsr_matrix(stand_in, blocksize=(3, 3)))
-                else:
-                    cache.solver.refresh(system.whole)
+            # Contact changes from step to step: the kept hierarchy gets the change of the scene forces' Jacobian since
+            # the build on every level (AMGConjugateGradient.update), the prolongators stay; a step without a change
+            # has the built levels (restore), so that a step's preconditioner depends on the build and the step only,
+            # as in a resumed run.
+            change = _scene_change(system, cache)
+            if change is not None:
+                cache.solver.update(change)
             else:
                 cache.solver.restore()
         return cache.solver.solve(system.matrix, b, x0=warm, extra=system.products, r0=residual)
+
+
+def _scene_change(system: _System, cache: SolverCache) -> sp.csr_matrix | None:
+    """What the scene forces' Jacobian (contact: between bodies, and folded into the diagonal for an obstacle) gained
+    on the free unknowns since the hierarchy's build; None where it is the same."""
+    size = system.matrix.shape[0]
+    change = None
+    if system.extra is not None or cache.extra is not None:
+        now = system.extra if system.extra is not None else sp.csr_matrix((size, size))
+        change = now - cache.extra if cache.extra is not None else sp.csr_matrix(now, copy=True)
+    folded = system.folded if system.folded is not None else 0.0
+    built = cache.folded if cache.folded is not None else 0.0
+    if not np.array_equal(folded, built):
+        diagonal = np.broadcast_to(np.subtract(folded, built), (size // 3, 3)).ravel()
+        if system.held is not None:  # eliminated rows stay identity rows
+            diagonal = np.where(system.held, 0.0, diagonal)
+        diagonal = sp.diags(diagonal, format="csr")
+        change = diagonal if change is None else change + diagonal
+    if change is None:
+        return None
+    change = sp.csr_matrix(change)
+    change.eliminate_zeros()
+    return change if change.nnz else None
 
 
 def _history(memory: dict, size: int, depth: int) -> np.ndarray:

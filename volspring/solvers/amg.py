@@ -3,6 +3,7 @@ CG iteration (see :class:`AMGConjugateGradient` for the choices and their measur
 
 from __future__ import annotations
 
+import copy
 import logging
 import time
 from dataclasses import dataclass, replace
@@ -204,6 +205,32 @@ class _Triangles:
 
     def __matmul__(self, x: np.ndarray) -> np.ndarray:
         return self.lower @ x + (self.upper @ x - self._diagonal_times(x))
+
+    def plus(self, change: sp.spmatrix) -> _Triangles:
+        """The triangles of this matrix plus a symmetric ``change`` (sparse, any pattern: its entries on and left of
+        the diagonal join ``lower``, those on and right of it ``upper``), as a new object; this one is untouched.
+        In this one's dtype, or in double where the change is outside single precision's range (see
+        :data:`SINGLE_PRECISION_RANGE`). The sum's triangles keep only its nonzero entries (scipy's sum), so
+        :meth:`whole` is for triangles made from a matrix."""
+        blocked = self.inverse is not None
+        size = self.inverse.shape[1] if self.inverse is not None else 1
+        change = sp.bsr_matrix(change, blocksize=self.blocksize) if blocked else sp.csr_matrix(change)
+        if not change.has_canonical_format:
+            _sum_duplicates(change)
+        dtype = self.dtype
+        if dtype != np.float64 and change.nnz and np.abs(change.data).max() > SINGLE_PRECISION_RANGE:
+            dtype = np.dtype(np.float64)
+        rows = np.repeat(np.arange(change.shape[0] // size, dtype=change.indices.dtype), np.diff(change.indptr))
+        new = copy.copy(self)
+        new.dtype = dtype
+        new.lower = self.lower.astype(dtype, copy=False) + _rows_where(change, rows, change.indices <= rows, dtype)
+        new.upper = self.upper.astype(dtype, copy=False) + _rows_where(change, rows, change.indices >= rows, dtype)
+        if blocked:
+            new.diagonal = _block_diagonal(new.lower, size)
+            new.inverse = np.linalg.inv(new.diagonal)
+        else:
+            new.diagonal = new.lower.diagonal()
+        return new
 
     def whole(self):
         """The matrix the triangles were made from, entry for entry (BSR for a blocked one, else CSR)."""
@@ -439,6 +466,7 @@ class AMGConjugateGradient(_LinearSolver):
         self._cycle: Callable[[np.ndarray], np.ndarray] | None = None  # r -> z, one V-cycle of it (not pickled)
         self._refreshed = False  # the finest level holds a refresh()'s matrix, not the built one
         self._levels: list | None = None  # an unpickled hierarchy's levels, until the next use puts them together
+        self._built_levels: list | None = None  # the built level matrices while update()'s are held, else None
 
     @property
     def hierarchy(self) -> Any:
@@ -448,21 +476,23 @@ class AMGConjugateGradient(_LinearSolver):
 
     def __getstate__(self):
         state = self.__dict__.copy()
-        state["_hierarchy"] = state["_cycle"] = None  # closures inside: put together again on use
+        state["_hierarchy"] = state["_cycle"] = state["_built_levels"] = None  # closures inside: made again on use
         hierarchy, source = self._hierarchy, self._source
         if hierarchy is not None and source is not None and isinstance(source.matrix, _Triangles) \
                 and source.prolongation is None:
             # The finest level's triangles are the kept copy, rounded to FINEST_DTYPE: the matrix the levels were
             # built from is gone, so the levels travel (the finest as the built triangles, not a refresh's).
             # A restriction held as a view of its prolongator's arrays travels as None (made again as P^T).
-            state["_levels"] = [(None if index == 0 else level.A, getattr(level, "P", None),
+            built = [level.A for level in hierarchy.levels] if self._built_levels is None else self._built_levels
+            state["_levels"] = [(None if index == 0 else matrix, getattr(level, "P", None),
                                  None if _transposed(level) else getattr(level, "R", None), level.B)
-                                for index, level in enumerate(hierarchy.levels)]
+                                for index, (level, matrix) in enumerate(zip(hierarchy.levels, built))]
         return state
 
     def __setstate__(self, state):
         self.__dict__.update(state)
         self.__dict__.setdefault("_levels", None)  # pickled before the levels travelled
+        self.__dict__.setdefault("_built_levels", None)
 
     def _unpickled(self) -> bool:
         """Make the hierarchy and its cycle again after unpickling: from the pickled levels, or rebuilt from the kept
@@ -548,7 +578,7 @@ class AMGConjugateGradient(_LinearSolver):
                                  f"= {sp.csr_matrix(aggregation)[row, column]:.6g}; expected couplings within the "
                                  f"matrix's pattern ({len(outside)} such entries)")
             excluded = excluded if excluded.nnz else None
-        self._levels = None
+        self._levels = self._built_levels = None
         self._source = _Source(frozen, near_null_space,
                                None if prolongation is None else sp.csr_matrix(prolongation), excluded=excluded)
         cached = set(vars(matrix))
@@ -659,11 +689,14 @@ class AMGConjugateGradient(_LinearSolver):
                 level.A = _Triangles(level.A)
 
     def refresh(self, matrix: sparse.spmatrix) -> None:
-        """Put ``matrix`` under the hierarchy's finest level (its smoother and residuals), keeping the coarse levels.
+        """Put ``matrix`` under the hierarchy's finest level (its smoother and residuals), keeping the coarse levels
+        as built (an :meth:`update` is undone first).
 
         For a system whose fine matrix changed in a few rows since the build, as contact changes from
         step to step: the fine smoother then sees the current contact stiffness, while the coarse
-        levels (the expensive part of a build) are kept. Measured on two 216-node cubes pressed
+        levels (the expensive part of a build) are kept. The implicit integrator gives contact to the hierarchy
+        by :meth:`update` instead, which reaches the first coarse level too and costs less than splitting a whole
+        matrix into triangles. Measured on two 216-node cubes pressed
         together (``benchmarks/bench_versions.py``'s contact scene): 11 CG iterations per step instead
         of 19 with a hierarchy rebuilt whenever the iterations double, and 23 with the contact
         Jacobian outside the hierarchy. Deterministic: the result depends on ``matrix`` and the
@@ -681,6 +714,7 @@ class AMGConjugateGradient(_LinearSolver):
             raise ValueError("refresh() applies to a hierarchy built on the matrix itself, not a two-level one")
         if matrix.shape != hierarchy.levels[0].A.shape:
             raise ValueError(f"matrix has shape {matrix.shape}; the hierarchy was built for {hierarchy.levels[0].A.shape}")
+        self.restore()  # the coarse levels of the build, not of an update
         if isinstance(source.matrix, _Triangles):
             finest = source.matrix
             given = sp.bsr_matrix(matrix, blocksize=finest.blocksize) if finest.blocksize else sp.csr_matrix(matrix)
@@ -693,14 +727,74 @@ class AMGConjugateGradient(_LinearSolver):
             self._set_smoothers(hierarchy)
         self._refreshed = True
 
+    def update(self, change: sparse.spmatrix) -> None:
+        """Hold the built matrix plus ``change`` on the finest level and its Galerkin product on the next
+        :data:`UPDATE_DEPTH` - 1 levels above the coarsest, keeping the prolongators and the coarsest level as built.
+        :meth:`restore` puts the built levels back.
+
+        For contact, which changes from step to step in a few rows. The prolongators are made without it (the build's
+        ``aggregation``), so the hierarchy sees contact only in its level matrices; with the change in them it is
+        the hierarchy a build with this contact would make, less the elastic changes since the build, on the levels
+        updated. Measured on two cubes of 4,913 nodes each (``benchmarks/bench_contact_cg.py --cells 16 --steps
+        25``; CG from zero, a contact step's iterations over the same step's without contact, median / max): with
+        only the finest level given the step's system (:meth:`refresh`, before), pressed 1.50 / 1.67 and drop
+        1.50 / 1.83; with the finest and the first coarse level updated, 1.33 / 1.50 and 1.00 / 1.33; with the
+        coarsest too, 1.17 / 1.33 and 1.00 / 1.17, but its factorisation costs as much as the rest (74 ms at 1,800
+        unknowns). The cost is in the touched rows: their rows of P in the Galerkin product, and one sum per level.
+
+        Parameters
+        ----------
+        change : (N, N) sparse
+            symmetric, and zero outside a few rows and columns (only those rows of P are multiplied): what the system
+            gained since the build (contact now minus contact then)
+        """
+        hierarchy, source = self.hierarchy, self._source
+        if hierarchy is None or source is None:
+            raise ValueError("the AMG hierarchy is not built: call build(matrix, near_null_space) first")
+        if source.prolongation is not None:
+            raise ValueError("update() applies to a hierarchy built on the matrix itself, not a two-level one")
+        levels = hierarchy.levels
+        if change.shape != levels[0].A.shape:
+            raise ValueError(f"change has shape {change.shape}; the hierarchy was built for {levels[0].A.shape}")
+        self.restore()
+        built = [level.A for level in levels]
+        built[0] = source.matrix
+        change = sp.csr_matrix(change, dtype=np.float64)
+        change.eliminate_zeros()
+        matrices = list(built)
+        for index in range(min(UPDATE_DEPTH, len(levels) - 1)):
+            if index:
+                blocks = (_blocksize(built[index - 1]), _blocksize(built[index]))
+                change = _galerkin_rows(levels[index - 1].P, change, blocks)
+                change.eliminate_zeros()
+            if not change.nnz:
+                break
+            matrices[index] = _plus(built[index], change)
+        self._put(hierarchy, matrices)
+        self._built_levels = built
+
+    def _put(self, hierarchy, matrices: list) -> None:
+        """Hold ``matrices`` on the levels of ``hierarchy`` but the coarsest; remake the smoothers of other smoothers
+        than the default, and the cycle."""
+        for level, matrix in zip(hierarchy.levels[:-1], matrices):
+            level.A = matrix
+        if not isinstance(matrices[0], _Triangles):
+            self._set_smoothers(hierarchy)
+        self._cycle = _v_cycle(hierarchy)
+
     def restore(self) -> None:
-        """Put the built matrix back under the finest level after :meth:`refresh` (nothing to do otherwise).
+        """Put the built matrix back under the finest level after :meth:`refresh`, and every level's after
+        :meth:`update` (nothing to do otherwise).
 
         Why: the preconditioner of a step must depend on the build and that step's own system only. A refresh
         kept after contact ends would make the steps that follow depend on the last contact step, which a run
         resumed from a checkpoint (whose hierarchy is rebuilt from the recorded build) does not have.
         """
         hierarchy, source = self.hierarchy, self._source
+        built, self._built_levels = self._built_levels, None
+        if hierarchy is not None and built is not None:
+            self._put(hierarchy, built)
+            return
         if hierarchy is None or source is None or not self._refreshed:
             return
         hierarchy.levels[0].A = source.matrix
@@ -774,6 +868,22 @@ class AMGConjugateGradient(_LinearSolver):
         info = SolveInfo("amg", iterations, residual, bool(residual <= self.rtol), self.rtol, initial,
                          setup, self.timer() - start, rebuilt)
         return self._finish(x, info)
+
+
+def _blocksize(matrix) -> int:
+    """The block size of a level's matrix (triangles, BSR or CSR)."""
+    blocksize = getattr(matrix, "blocksize", None)
+    return 1 if blocksize is None else blocksize[0]
+
+
+def _plus(matrix, change: sp.csr_matrix):
+    """A level's ``matrix`` (triangles, or BSR or CSR) plus ``change``, as a new one in the same form."""
+    if isinstance(matrix, _Triangles):
+        return matrix.plus(change)
+    if matrix.format == "bsr":
+        total = matrix + sp.bsr_matrix(change, blocksize=matrix.blocksize)
+        return sp.bsr_matrix(total, blocksize=matrix.blocksize)
+    return sp.csr_matrix(matrix + change)
 
 
 def _sum_duplicates(matrix) -> None:
@@ -867,6 +977,9 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
     return MultilevelSolver(levels, coarse_solver="splu")
 
 
+#: The levels :meth:`AMGConjugateGradient.update` gives the change to, from the finest; coarser ones keep the
+#: build's matrix (see there).
+UPDATE_DEPTH = 2
 #: The pieces :func:`_galerkin` splits R's block rows into (1: the whole product at once).
 GALERKIN_CHUNKS = 8
 
@@ -1012,22 +1125,40 @@ def _stored_at(matrix, rows: np.ndarray, columns: np.ndarray) -> tuple[np.ndarra
     return np.where(found, position, -1), (rows % size) * size + columns % size
 
 
-def _galerkin_rows(prolongation, change: sp.csr_matrix) -> sp.csr_matrix:
+def _galerkin_rows(prolongation, change: sp.csr_matrix, blocksize: tuple[int, int] | None = None) -> sp.csr_matrix:
     """P^T C P for a symmetric ``change`` C that is zero outside a few rows (and so columns): the product of the
     rows of P that C touches only (CSR, the coarse level's size), by block products: at 9,826 nodes with 2,811
-    contact rows, 9 and 7 mat-vecs on the first two levels against 20 and 17 with CSR ones."""
-    prolongation = prolongation if prolongation.format == "bsr" else prolongation.tobsr()
-    size = prolongation.blocksize[0]
+    contact rows, 9 and 7 mat-vecs on the first two levels against 20 and 17 with CSR ones. A CSR P (the finest
+    level's, in single precision) gives its touched rows in double, as blocks of ``blocksize``."""
+    if prolongation.format == "bsr":
+        blocksize = prolongation.blocksize
+    elif blocksize is None:
+        raise ValueError("a CSR prolongation is read by blocks of a given blocksize, and none was given")
+    size = blocksize[0]
     blocks = np.unique(np.flatnonzero(np.diff(change.indptr)) // size)  # block rows of P that C touches
     rows = (size * blocks[:, None] + np.arange(size)).ravel()
-    starts = prolongation.indptr[blocks]  # those block rows of P, without converting all of it
-    counts = prolongation.indptr[blocks + 1] - starts
-    indptr = np.concatenate([[0], np.cumsum(counts)])
-    picked = np.arange(indptr[-1]) + np.repeat(starts - indptr[:-1], counts)  # each row's stored blocks
-    touched = sp.bsr_matrix((prolongation.data[picked], prolongation.indices[picked], indptr),
-                            shape=(len(rows), prolongation.shape[1]))
-    sub = sp.bsr_matrix(change[rows][:, rows], blocksize=(size, size))
-    return sp.csr_matrix(touched.T @ sub @ touched)
+    if prolongation.format == "bsr":  # those block rows of P, without converting all of it
+        indptr, picked = _rows_picked(prolongation.indptr, blocks)
+        touched = sp.bsr_matrix((prolongation.data[picked], prolongation.indices[picked], indptr),
+                                shape=(len(rows), prolongation.shape[1]))
+    else:
+        touched = sp.bsr_matrix(sp.csr_matrix(prolongation)[rows].astype(np.float64), blocksize=blocksize)
+    change = sp.csr_matrix(change)
+    position = np.full(change.shape[0], -1, dtype=np.int64)
+    position[rows] = np.arange(len(rows))  # C's rows and columns among the touched ones (C is zero elsewhere)
+    indptr, picked = _rows_picked(change.indptr, rows)
+    sub = sp.csr_matrix((change.data[picked], position[change.indices[picked]], indptr), shape=(len(rows), len(rows)))
+    sub = sp.bsr_matrix(sub, blocksize=(size, size))
+    return sp.csr_matrix(_product(_product(touched.T.tobsr(), sub), touched))
+
+
+def _rows_picked(indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(the row pointers of ``rows`` of a compressed matrix with row pointers ``indptr``, the positions of their
+    stored entries or blocks in its arrays, row after row)."""
+    starts = indptr[rows]
+    counts = indptr[rows + 1] - starts
+    picked_indptr = np.concatenate([[0], np.cumsum(counts)])
+    return picked_indptr, np.arange(picked_indptr[-1]) + np.repeat(starts - picked_indptr[:-1], counts)
 
 
 def _absolute(matrix):
