@@ -96,6 +96,19 @@ def median_seconds(function, repeats=31, inner=3):
     return float(np.median(times))
 
 
+def warm_up() -> None:
+    """Step a small beam (525 nodes: two AMG levels) before anything is timed. The compiled kernels (the ``fast``
+    extra) are compiled, or loaded from numba's cache, at their first call in a process: 34 ms, which put 560 of the
+    first 1k-node build's 766 mat-vecs there, and 28 of its 90 per step amortised over 20 steps (stop 32). That is a
+    cost of starting the process, not of a step or a build."""
+    from meshing import structured_box
+
+    mesh = structured_box((20, 4, 4), (1.0, 0.2, 0.2))
+    model = Model.from_mesh(mesh, MATERIAL)
+    scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
+    run(scene, 1e-3, steps=2)
+
+
 def run(scene, dt, *, steps, **options):
     """Step ``steps`` times from rest; per-step records and one mat-vec time of the last matrix."""
     integrator = ImplicitEuler(timer=CLOCK, **options)  # every *_seconds figure on the same clock
@@ -159,6 +172,7 @@ def main(argv=None):
     from volspring import kernels
 
     print(f"kernels: {kernels.active()} (volspring.kernels; VOLSPRING_KERNELS=numpy or numba chooses)")
+    warm_up()
     results = {1e-3: [], 1e-6: []}
     counts = []
     for target in args.nodes:
