@@ -198,7 +198,12 @@ def test_update_gives_the_levels_above_the_coarsest_the_change_and_restore_takes
     coarsest, before = levels[2].A, solver.precondition(rhs)
     change = _contact_like_change(matrix.shape[0], np.random.default_rng(8))
     solver.update(2.0 * change)
-    solver.update(change)
+    given = change.copy()
+    given.data[0] = 0.0  # an explicit zero, which the update drops from its own copy only
+    kept = given.copy()
+    solver.update(given)
+    assert np.array_equal(given.data, kept.data) and np.array_equal(given.indices, kept.indices)
+    change = given
     fine, first = _level_dense(levels[0].A), _level_dense(levels[1].A)
     # The finest level in single precision with the default smoother (unit round-off 6e-8 of entries of order 50).
     rounding = 1e-6 if smoother == "gauss_seidel" else 1e-12

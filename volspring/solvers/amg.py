@@ -216,6 +216,7 @@ class _Triangles:
         size = self.inverse.shape[1] if self.inverse is not None else 1
         change = sp.bsr_matrix(change, blocksize=self.blocksize) if blocked else sp.csr_matrix(change)
         if not change.has_canonical_format:
+            change = change.copy()  # sorted and summed in place: not the caller's arrays
             _sum_duplicates(change)
         dtype = self.dtype
         if dtype != np.float64 and change.nnz and np.abs(change.data).max() > SINGLE_PRECISION_RANGE:
@@ -759,7 +760,7 @@ class AMGConjugateGradient(_LinearSolver):
         self.restore()
         built = [level.A for level in levels]
         built[0] = source.matrix
-        change = sp.csr_matrix(change, dtype=np.float64)
+        change = sp.csr_matrix(change, dtype=np.float64, copy=True)  # the caller's arrays stay as they are
         change.eliminate_zeros()
         matrices = list(built)
         for index in range(min(UPDATE_DEPTH, len(levels) - 1)):
