@@ -508,10 +508,10 @@ class ImplicitEuler(Integrator):
         """The step's velocity change and the solve's info; ``guess``: (x0, b - A x0) or None (from zero)."""
         warm, residual = guess if guess is not None else (None, None)
         if self.method == "amg":
-            # Contact changes from step to step: the kept hierarchy gets the change of the scene forces' Jacobian since
-            # the build on every level (AMGConjugateGradient.update), the prolongators stay; a step without a change
-            # has the built levels (restore), so that a step's preconditioner depends on the build and the step only,
-            # as in a resumed run.
+            # Contact changes from step to step: the kept hierarchy's finest and first coarse level get the change of
+            # the scene forces' Jacobian since the build (AMGConjugateGradient.update), the prolongators stay; a step
+            # without a change has the built levels (restore), so that a step's preconditioner depends on the build
+            # and the step only, as in a resumed run.
             change = _scene_change(system, cache)
             if change is not None:
                 cache.solver.update(change)
