@@ -226,6 +226,25 @@ def test_update_gives_the_levels_above_the_coarsest_the_change_and_restore_takes
     assert np.array_equal(_level_dense(levels[1].A), built[1])
 
 
+def test_update_and_refresh_refuse_what_they_cannot_apply(system):
+    """Before a build, with a matrix or change of another shape, or on a two-level hierarchy: a clear error."""
+    matrix, modes, _ = system
+    size = matrix.shape[0]
+    with pytest.raises(ValueError, match=r"not built: call build"):
+        AMGConjugateGradient().update(sp.identity(size, format="csr"))
+    solver = AMGConjugateGradient()
+    solver.build(matrix, modes)
+    with pytest.raises(ValueError, match=rf"change has shape \(30, 30\); the hierarchy was built for \({size}, {size}\)"):
+        solver.update(sp.identity(30, format="csr"))
+    with pytest.raises(ValueError, match=rf"matrix has shape \(30, 30\); the hierarchy was built for"):
+        solver.refresh(sp.identity(30, format="csr"))
+    prolongation = sp.csr_matrix(np.repeat(np.eye(size // 30), 30, axis=0))  # 30 unknowns per coarse one
+    two_level = AMGConjugateGradient()
+    two_level.build(matrix, np.ones((size // 30, 1)), prolongation=prolongation)
+    with pytest.raises(ValueError, match=r"update\(\) applies to a hierarchy built on the matrix itself"):
+        two_level.update(sp.identity(size, format="csr"))
+
+
 def test_an_update_beyond_single_precision_holds_the_finest_level_in_double(system, rhs):
     """The finest level's triangles are single precision within SINGLE_PRECISION_RANGE; a change beyond it (a
     contact stiffness 1e20 times the matrix's) is added in double, not rounded to infinity."""
