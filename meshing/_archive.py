@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from meshing._io import atomic_path
+from meshing._signals import interruptions_deferred
 
 __all__ = ["labelled_codes", "read_archive", "take_array", "write_archive"]
 
@@ -50,8 +51,9 @@ def write_archive(path, arrays, *, format_name: str, version: int) -> Path:
     """
     path = Path(path)
     entries = {"format": np.asarray(format_name), "version": np.asarray(version, dtype=np.int64), **arrays}
-    with atomic_path(path) as tmp, open(tmp, "wb") as file:
-        # A file object, not a name: np.savez_compressed would add ".npz" to a name without it.
+    # A stop waits for the archive (meshing._signals.interruptions_deferred: zipfile cut in the middle cannot clean
+    # up after itself). A file object, not a name: np.savez_compressed would add ".npz" to a name without it.
+    with atomic_path(path) as tmp, open(tmp, "wb") as file, interruptions_deferred():
         np.savez_compressed(file, **entries)
     return path
 

@@ -41,7 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from meshing._io import atomic_path, interruptions_first
+from meshing._io import atomic_path
+from meshing._signals import interruptions_deferred
 from volspring.scene import State
 import os
 from typing import TYPE_CHECKING, Any
@@ -197,7 +198,7 @@ def save_checkpoint(path: str | os.PathLike[str], state: State, *, scene: Scene 
     arrays["__manifest__"] = np.asarray(json.dumps(manifest))
     path = Path(path)
     buffer = io.BytesIO()
-    with interruptions_first():  # a stop inside savez surfaces as itself, not as zipfile's clean-up error
+    with interruptions_deferred():  # a stop waits for savez: zipfile cut in the middle cannot clean up after itself
         np.savez(buffer, **arrays)  # type: ignore[arg-type]  # numpy's stub: a ** key could be allow_pickle
     with atomic_path(path) as tmp:
         tmp.write_bytes(buffer.getvalue())
