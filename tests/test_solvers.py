@@ -245,6 +245,31 @@ def test_update_and_refresh_refuse_what_they_cannot_apply(system):
         two_level.update(sp.identity(size, format="csr"))
 
 
+def test_block_triangles_plus_a_change_invert_their_diagonal_blocks_as_pyamg_does():
+    """A coarse level's 6x6 diagonal block can have empty rows (an aggregate whose candidates are dependent): the
+    triangles of that level plus a change take the pseudo-inverses of their diagonal blocks, as pyamg and the
+    triangles' own constructor do, where np.linalg.inv raised "Singular matrix"."""
+    from pyamg.util.utils import get_block_diag
+
+    rng = np.random.default_rng(4)
+    factor = rng.normal(size=(24, 24))
+    dense = factor @ factor.T + 24 * np.eye(24)
+    dense[10:12, :] = dense[:, 10:12] = 0.0  # the second block's last two unknowns: empty rows and columns
+    triangles = _Triangles(sp.bsr_matrix(dense, blocksize=(6, 6)))
+    change = np.zeros((24, 24))
+    vector = np.zeros(24)
+    vector[[0, 13]] = 1.0, -1.0  # a contact-like coupling of the first and third blocks
+    change += 5.0 * np.outer(vector, vector)
+    updated = triangles.plus(sp.csr_matrix(change))
+    expected = get_block_diag(sp.bsr_matrix(dense + change, blocksize=(6, 6)), blocksize=6, inv_flag=True)
+    # pinv of the same blocks: the same arithmetic to rounding (entries of order 1/24).
+    np.testing.assert_allclose(updated.inverse, expected, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(_level_dense(updated), dense + change, rtol=0, atol=1e-12)
+    x = np.zeros(24)
+    updated.forward(x, np.ones(24))
+    assert np.isfinite(x).all() and x[10] == x[11] == 0.0
+
+
 def test_an_update_beyond_single_precision_holds_the_finest_level_in_double(system, rhs):
     """The finest level's triangles are single precision within SINGLE_PRECISION_RANGE; a change beyond it (a
     contact stiffness 1e20 times the matrix's) is added in double, not rounded to infinity."""

@@ -227,8 +227,12 @@ class _Triangles:
         new.lower = self.lower.astype(dtype, copy=False) + _rows_where(change, rows, change.indices <= rows, dtype)
         new.upper = self.upper.astype(dtype, copy=False) + _rows_where(change, rows, change.indices >= rows, dtype)
         if blocked:
+            from pyamg.util.utils import get_block_diag
+
             new.diagonal = _block_diagonal(new.lower, size)
-            new.inverse = np.linalg.inv(new.diagonal)
+            # Pseudo-inverses, as pyamg's (and __init__): a coarse level can hold a block with empty rows (an aggregate
+            # whose candidates are dependent).
+            new.inverse = get_block_diag(new.lower, blocksize=size, inv_flag=True).astype(dtype, copy=False)
         else:
             new.diagonal = new.lower.diagonal()
         return new
