@@ -234,7 +234,8 @@ def test_update_and_refresh_refuse_what_they_cannot_apply(system):
         AMGConjugateGradient().update(sp.identity(size, format="csr"))
     solver = AMGConjugateGradient()
     solver.build(matrix, modes)
-    with pytest.raises(ValueError, match=rf"change has shape \(30, 30\); the hierarchy was built for \({size}, {size}\)"):
+    shapes = rf"change has shape \(30, 30\); the hierarchy was built for \({size}, {size}\)"
+    with pytest.raises(ValueError, match=shapes):
         solver.update(sp.identity(30, format="csr"))
     with pytest.raises(ValueError, match=rf"matrix has shape \(30, 30\); the hierarchy was built for"):
         solver.refresh(sp.identity(30, format="csr"))

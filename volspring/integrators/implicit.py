@@ -381,7 +381,7 @@ class ImplicitEuler(Integrator):
         if not 0.8 <= dt / float(memory[_KEY + "amg_dt"]) <= 1.25:
             return f"dt changed from {float(memory[_KEY + 'amg_dt']):.3g} s to {dt:.3g} s"
         # Contact starting, ending, spreading or receding: a hierarchy built without the contact stiffness (or
-        # with contact that is gone) preconditions poorly even with its finest level refreshed.
+        # with contact that is gone) preconditions poorly even with its levels updated (the coarsest keeps the build's).
         at_build = int(memory.get(_KEY + "amg_touched", 0))
         grown = touched > self.rebuild_growth * at_build or at_build > self.rebuild_growth * touched
         if grown and abs(touched - at_build) > CONTACT_REBUILD_SHARE * pattern.size:
