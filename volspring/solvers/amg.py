@@ -469,9 +469,9 @@ class AMGConjugateGradient(_LinearSolver):
         self._source: _Source | None = None  # what the hierarchy is built from (pickled)
         self._hierarchy: Any = None  # pyamg MultilevelSolver (not pickled)
         self._cycle: Callable[[np.ndarray], np.ndarray] | None = None  # r -> z, one V-cycle of it (not pickled)
-        self._refreshed = False  # the finest level holds a refresh()'s matrix, not the built one
         self._levels: list | None = None  # an unpickled hierarchy's levels, until the next use puts them together
-        self._built_levels: list | None = None  # the built level matrices while update()'s are held, else None
+        # The built level matrices while refresh()'s or update()'s are held, else None.
+        self._built_levels: list | None = None
 
     @property
     def hierarchy(self) -> Any:
@@ -648,7 +648,7 @@ class AMGConjugateGradient(_LinearSolver):
 
     def _adopt(self, hierarchy) -> None:
         """Factorise the coarsest level and make the cycle of ``hierarchy``, now the solver's."""
-        self._refreshed = False
+        self._built_levels = None
         coarsest = hierarchy.levels[-1].A
         try:
             hierarchy.coarse_solver(coarsest, np.zeros(coarsest.shape[0]))  # it factorises lazily: count it here
@@ -719,18 +719,17 @@ class AMGConjugateGradient(_LinearSolver):
             raise ValueError("refresh() applies to a hierarchy built on the matrix itself, not a two-level one")
         if matrix.shape != hierarchy.levels[0].A.shape:
             raise ValueError(f"matrix has shape {matrix.shape}; the hierarchy was built for {hierarchy.levels[0].A.shape}")
-        self.restore()  # the coarse levels of the build, not of an update
+        built = self._built()
         if isinstance(source.matrix, _Triangles):
             finest = source.matrix
             given = sp.bsr_matrix(matrix, blocksize=finest.blocksize) if finest.blocksize else sp.csr_matrix(matrix)
             if not given.has_canonical_format:
                 given = given.copy()
                 _sum_duplicates(given)
-            hierarchy.levels[0].A = _Triangles(given, point_wise=True, dtype=_finest_dtype(given))
+            held = _Triangles(given, point_wise=True, dtype=_finest_dtype(given))
         else:
-            hierarchy.levels[0].A = sp.bsr_matrix(matrix, blocksize=(3, 3))
-            self._set_smoothers(hierarchy)
-        self._refreshed = True
+            held = sp.bsr_matrix(matrix, blocksize=(3, 3))
+        self._hold([held, *built[1:]], built)
 
     def update(self, change: sparse.spmatrix) -> None:
         """Hold the built matrix plus ``change`` on the finest level and its Galerkin product on the next
@@ -761,9 +760,7 @@ class AMGConjugateGradient(_LinearSolver):
         levels = hierarchy.levels
         if change.shape != levels[0].A.shape:
             raise ValueError(f"change has shape {change.shape}; the hierarchy was built for {levels[0].A.shape}")
-        self.restore()
-        built = [level.A for level in levels]
-        built[0] = source.matrix
+        built = self._built()
         change = sp.csr_matrix(change, dtype=np.float64, copy=True)  # the caller's arrays stay as they are
         change.eliminate_zeros()
         matrices = list(built)
@@ -775,37 +772,37 @@ class AMGConjugateGradient(_LinearSolver):
             if not change.nnz:
                 break
             matrices[index] = _plus(built[index], change)
-        self._put(hierarchy, matrices)
-        self._built_levels = built
+        self._hold(matrices, built)
 
-    def _put(self, hierarchy, matrices: list) -> None:
-        """Hold ``matrices`` on the levels of ``hierarchy`` but the coarsest; remake the smoothers of other smoothers
-        than the default, and the cycle."""
-        for level, matrix in zip(hierarchy.levels[:-1], matrices):
+    def _built(self) -> list:
+        """The built matrix of every level (the finest as the kept copy), with the built levels back in place."""
+        source = self._source
+        assert source is not None  # refresh() and update() check for a build first
+        self.restore()
+        built = [level.A for level in self.hierarchy.levels]
+        built[0] = source.matrix
+        return built
+
+    def _hold(self, matrices: list, built: list) -> None:
+        """Hold ``matrices`` on the hierarchy's levels, ``built`` kept for :meth:`restore`; the cycle reads each level's
+        matrix as it runs, and the smoothers of other smoothers than the default are made again."""
+        for level, matrix in zip(self.hierarchy.levels, matrices):
             level.A = matrix
         if not isinstance(matrices[0], _Triangles):
-            self._set_smoothers(hierarchy)
-        self._cycle = _v_cycle(hierarchy)
+            self._set_smoothers(self.hierarchy)
+        self._built_levels = None if matrices is built else built
 
     def restore(self) -> None:
-        """Put the built matrix back under the finest level after :meth:`refresh`, and every level's after
-        :meth:`update` (nothing to do otherwise).
+        """Put the built matrices back on the levels after :meth:`refresh` or :meth:`update` (nothing to do
+        otherwise).
 
         Why: the preconditioner of a step must depend on the build and that step's own system only. A refresh
         kept after contact ends would make the steps that follow depend on the last contact step, which a run
         resumed from a checkpoint (whose hierarchy is rebuilt from the recorded build) does not have.
         """
-        hierarchy, source = self.hierarchy, self._source
-        built, self._built_levels = self._built_levels, None
-        if hierarchy is not None and built is not None:
-            self._put(hierarchy, built)
-            return
-        if hierarchy is None or source is None or not self._refreshed:
-            return
-        hierarchy.levels[0].A = source.matrix
-        if not isinstance(source.matrix, _Triangles):
-            self._set_smoothers(hierarchy)
-        self._refreshed = False
+        built = self._built_levels
+        if self.hierarchy is not None and built is not None:
+            self._hold(built, built)
 
     def precondition(self, r: np.ndarray) -> np.ndarray:
         """One cycle from a zero guess: z ~ A^-1 r (an SPD operator for CG).
