@@ -204,6 +204,12 @@ def test_update_gives_the_levels_above_the_coarsest_the_change_and_restore_takes
     solver.update(given)
     assert np.array_equal(given.data, kept.data) and np.array_equal(given.indices, kept.indices)
     change = given
+    # The levels are made when the solver first preconditions: a solve that its guess already meets leaves them.
+    changed = sp.bsr_matrix(matrix + change, blocksize=(3, 3))
+    exact = np.linalg.solve(changed.toarray(), rhs)
+    assert solver.solve(changed, rhs, x0=exact)[1].iterations == 0
+    assert all(np.array_equal(_level_dense(level.A), dense) for level, dense in zip(levels, built))
+    solver.precondition(rhs)
     fine, first = _level_dense(levels[0].A), _level_dense(levels[1].A)
     # The finest level in single precision with the default smoother (unit round-off 6e-8 of entries of order 50).
     rounding = 1e-6 if smoother == "gauss_seidel" else 1e-12
@@ -220,9 +226,14 @@ def test_update_gives_the_levels_above_the_coarsest_the_change_and_restore_takes
     solver.restore()
     assert solver.precondition(rhs).tobytes() == before.tobytes()
     assert all(np.array_equal(_level_dense(level.A), dense) for level, dense in zip(levels, built))
-    # A refresh after an update starts from the built levels too.
+    # A refresh after an update starts from the built levels too, and drops a change not yet made.
+    solver.update(change)
+    solver.precondition(rhs)
+    solver.refresh(matrix)
+    assert np.array_equal(_level_dense(levels[1].A), built[1])
     solver.update(change)
     solver.refresh(matrix)
+    solver.precondition(rhs)
     assert np.array_equal(_level_dense(levels[1].A), built[1])
 
 
@@ -280,6 +291,7 @@ def test_an_update_beyond_single_precision_holds_the_finest_level_in_double(syst
     change = 1e20 * _contact_like_change(matrix.shape[0], np.random.default_rng(8))
     assert np.abs(change.data).max() > amg.SINGLE_PRECISION_RANGE
     solver.update(change)
+    assert np.isfinite(solver.precondition(rhs)).all()
     finest = solver.hierarchy.levels[0].A
     assert finest.dtype == np.float64 and finest.lower.dtype == np.float64
     expected = matrix.astype(np.float32).toarray().astype(np.float64) + change.toarray()

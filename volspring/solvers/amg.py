@@ -472,6 +472,7 @@ class AMGConjugateGradient(_LinearSolver):
         self._levels: list | None = None  # an unpickled hierarchy's levels, until the next use puts them together
         # The built level matrices while refresh()'s or update()'s are held, else None.
         self._built_levels: list | None = None
+        self._pending: sp.csr_matrix | None = None  # update()'s change, put on the levels at the next precondition()
 
     @property
     def hierarchy(self) -> Any:
@@ -498,6 +499,7 @@ class AMGConjugateGradient(_LinearSolver):
         self.__dict__.update(state)
         self.__dict__.setdefault("_levels", None)  # pickled before the levels travelled
         self.__dict__.setdefault("_built_levels", None)
+        self.__dict__.setdefault("_pending", None)
 
     def _unpickled(self) -> bool:
         """Make the hierarchy and its cycle again after unpickling: from the pickled levels, or rebuilt from the kept
@@ -583,7 +585,7 @@ class AMGConjugateGradient(_LinearSolver):
                                  f"= {sp.csr_matrix(aggregation)[row, column]:.6g}; expected couplings within the "
                                  f"matrix's pattern ({len(outside)} such entries)")
             excluded = excluded if excluded.nnz else None
-        self._levels = self._built_levels = None
+        self._levels = self._built_levels = self._pending = None
         self._source = _Source(frozen, near_null_space,
                                None if prolongation is None else sp.csr_matrix(prolongation), excluded=excluded)
         cached = set(vars(matrix))
@@ -736,6 +738,9 @@ class AMGConjugateGradient(_LinearSolver):
         :data:`UPDATE_DEPTH` - 1 levels above the coarsest, keeping the prolongators and the coarsest level as built.
         :meth:`restore` puts the built levels back.
 
+        The levels are made at the next :meth:`precondition` (the built ones are held until then): a solve whose
+        starting guess already meets its tolerance, as most steps of a resting contact do, does not pay for them.
+
         For contact, which changes from step to step in a few rows. The prolongators are made without it (the build's
         ``aggregation``), so the hierarchy sees contact only in its level matrices; with the change in them it is
         the hierarchy a build with this contact would make, less the elastic changes since the build, on the levels
@@ -760,9 +765,17 @@ class AMGConjugateGradient(_LinearSolver):
         levels = hierarchy.levels
         if change.shape != levels[0].A.shape:
             raise ValueError(f"change has shape {change.shape}; the hierarchy was built for {levels[0].A.shape}")
-        built = self._built()
+        self.restore()
         change = sp.csr_matrix(change, dtype=np.float64, copy=True)  # the caller's arrays stay as they are
         change.eliminate_zeros()
+        self._pending = change if change.nnz else None
+
+    def _apply_pending(self) -> None:
+        """Put :meth:`update`'s change on the levels (see there)."""
+        change, self._pending = self._pending, None
+        assert change is not None
+        levels = self.hierarchy.levels
+        built = self._built()
         matrices = list(built)
         for index in range(min(UPDATE_DEPTH, len(levels) - 1)):
             if index:
@@ -800,7 +813,7 @@ class AMGConjugateGradient(_LinearSolver):
         kept after contact ends would make the steps that follow depend on the last contact step, which a run
         resumed from a checkpoint (whose hierarchy is rebuilt from the recorded build) does not have.
         """
-        built = self._built_levels
+        built, self._pending = self._built_levels, None
         if self.hierarchy is not None and built is not None:
             self._hold(built, built)
 
@@ -820,6 +833,8 @@ class AMGConjugateGradient(_LinearSolver):
             if self._source is None:
                 raise ValueError("the AMG hierarchy is not built: call build(matrix, near_null_space) first")
             self._unpickled()  # the same hierarchy again
+        if self._pending is not None:
+            self._apply_pending()
         source, cycle = self._source, self._cycle
         assert source is not None and cycle is not None  # both set by _construct()
         if source.prolongation is None:
