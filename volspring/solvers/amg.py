@@ -806,8 +806,8 @@ class AMGConjugateGradient(_LinearSolver):
         self._built_levels = None if matrices is built else built
 
     def restore(self) -> None:
-        """Put the built matrices back on the levels after :meth:`refresh` or :meth:`update` (nothing to do
-        otherwise).
+        """Put the built matrices back on the levels after :meth:`refresh` or :meth:`update`, and drop a change
+        :meth:`update` has not yet put on them (nothing to do otherwise).
 
         Why: the preconditioner of a step must depend on the build and that step's own system only. A refresh
         kept after contact ends would make the steps that follow depend on the last contact step, which a run
