@@ -149,15 +149,13 @@ class _Triangles:
         self.dtype = np.dtype(matrix.dtype if dtype is None else dtype)
         blocked = matrix.format == "bsr"
         size = matrix.blocksize[0] if blocked else 1
-        rows = np.repeat(np.arange(matrix.shape[0] // size, dtype=matrix.indices.dtype), np.diff(matrix.indptr))
         halves = []
-        for keep, where in (("lower", matrix.indices <= rows), ("upper", matrix.indices >= rows)):
-            half = _rows_where(matrix, rows, where, self.dtype)
+        for keep, half in _halves(matrix, self.dtype):
             # One half at a time, its block form dropped at once: they are made after a build, at its peak memory.
             halves.append(_scalar_triangle(half, keep) if blocked and point_wise else half)
             del half
         lower, upper = halves
-        del rows, halves
+        del halves
         self.blocksize = (size, size) if blocked else None
         self.inverse = None
         if blocked and not point_wise:
@@ -212,8 +210,7 @@ class _Triangles:
         In this one's dtype, or in double where the change is outside single precision's range (see
         :data:`SINGLE_PRECISION_RANGE`). The sum's triangles keep only its nonzero entries (scipy's sum), so
         :meth:`whole` is for triangles made from a matrix."""
-        blocked = self.inverse is not None
-        size = self.inverse.shape[1] if self.inverse is not None else 1
+        blocked = self.inverse is not None  # swept by blocks (else point-wise: the change's entries split one by one)
         change = sp.bsr_matrix(change, blocksize=self.blocksize) if blocked else sp.csr_matrix(change)
         if not change.has_canonical_format:
             change = change.copy()  # sorted and summed in place: not the caller's arrays
@@ -221,14 +218,15 @@ class _Triangles:
         dtype = self.dtype
         if dtype != np.float64 and change.nnz and np.abs(change.data).max() > SINGLE_PRECISION_RANGE:
             dtype = np.dtype(np.float64)
-        rows = np.repeat(np.arange(change.shape[0] // size, dtype=change.indices.dtype), np.diff(change.indptr))
+        (_, lower), (_, upper) = _halves(change, dtype)
         new = copy.copy(self)
         new.dtype = dtype
-        new.lower = self.lower.astype(dtype, copy=False) + _rows_where(change, rows, change.indices <= rows, dtype)
-        new.upper = self.upper.astype(dtype, copy=False) + _rows_where(change, rows, change.indices >= rows, dtype)
+        new.lower = self.lower.astype(dtype, copy=False) + lower
+        new.upper = self.upper.astype(dtype, copy=False) + upper
         if blocked:
             from pyamg.util.utils import get_block_diag
 
+            size = change.blocksize[0]
             new.diagonal = _block_diagonal(new.lower, size)
             # Pseudo-inverses, as pyamg's (and __init__): a coarse level can hold a block with empty rows (an aggregate
             # whose candidates are dependent).
@@ -296,6 +294,15 @@ def _finest_dtype(matrix) -> np.dtype:
         logger.debug("finest AMG level held in double precision: largest entry %.3g, smallest diagonal %.3g",
                      largest, smallest)
     return np.dtype(FINEST_DTYPE if inside else matrix.dtype)
+
+
+def _halves(matrix, dtype):
+    """("lower", the entries (or blocks) of a CSR (or BSR) ``matrix`` with sorted indices on and left of the
+    diagonal), then ("upper", those on and right of it), as ``dtype``: one at a time (see :class:`_Triangles`)."""
+    size = matrix.blocksize[0] if matrix.format == "bsr" else 1
+    rows = np.repeat(np.arange(matrix.shape[0] // size, dtype=matrix.indices.dtype), np.diff(matrix.indptr))
+    yield "lower", _rows_where(matrix, rows, matrix.indices <= rows, dtype)
+    yield "upper", _rows_where(matrix, rows, matrix.indices >= rows, dtype)
 
 
 def _rows_where(matrix, rows: np.ndarray, where: np.ndarray, dtype=None):
@@ -994,8 +1001,8 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
     return MultilevelSolver(levels, coarse_solver="splu")
 
 
-#: The levels :meth:`AMGConjugateGradient.update` gives the change to, from the finest; coarser ones keep the
-#: build's matrix (see there).
+#: The levels :meth:`AMGConjugateGradient.update` gives the change to, from the finest (never the coarsest, whose
+#: factorisation would be made again); the others keep the build's matrix (see there).
 UPDATE_DEPTH = 2
 #: The pieces :func:`_galerkin` splits R's block rows into (1: the whole product at once).
 GALERKIN_CHUNKS = 8
