@@ -53,3 +53,40 @@ def test_no_locking_from_nu_045_to_0499(name):
     the torus -4.2% and the L-bracket -6.9% against the converged reference."""
     drift = _ratios(name, 0.499)["smoothed"] / _ratios(name, 0.45)["smoothed"] - 1
     assert abs(drift) < 0.03, drift
+
+
+@functools.lru_cache(maxsize=None)
+def _volume_comparison(name, nu, folder):
+    from validation.compare import compare_static
+
+    case = build_heldout_case(name, nu=nu)
+    return compare_static(case, rules=(), models=("springs+volume", "smoothed"), elements=("TH",),
+                          folder=folder).results
+
+
+@pytest.mark.parametrize("name, nu", [("bunny_gravity", 0.45), ("bunny_gravity", 0.49), ("l_bracket_gravity", 0.49)])
+def test_volume_change_matches_the_reference_where_it_is_not_a_cancellation(name, nu, tmp_path_factory):
+    """The issue's goals: the smoothed rung's volume change within 5% of the reference's, the volume rung's within 10%
+    at nu 0.49, as the report measures them (validation.compare): a rung's moved mesh (it is geometrically exact)
+    against Taylor-Hood's integral of div u. Taylor-Hood's is converged there: the bunny refined once moves it by
+    0.0-0.7% (scratch study, stop 33). Measured: smoothed 1.002 and 1.000 on the bunny, 0.994 on the L-bracket;
+    springs+volume 1.017, 1.045 and 1.041. Against Taylor-Hood's moved mesh instead, which grows by O(rotation^2)
+    where the ears turn (1.48 and 3.46 times its net change at nu 0.45 and 0.49), the bunny read 0.68 at nu 0.45
+    and none at 0.49; the integral of div u of the rung's own answer, which shrinks by as much where it turns, read
+    1.06 and 1.24."""
+    results = _volume_comparison(name, nu, str(tmp_path_factory.getbasetemp() / "fem-cache"))
+    smoothed, volume_rung = results["models"]["smoothed"], results["models"]["springs+volume"]
+    assert abs(smoothed["volume_change_error_vs_fem"]) < 0.05, smoothed["volume_change_error_vs_fem"]
+    if nu == 0.49:
+        assert abs(volume_rung["volume_change_error_vs_fem"]) < 0.10, volume_rung["volume_change_error_vs_fem"]
+
+
+@pytest.mark.parametrize("name", ["torus_gravity", "capsule_gravity"])
+def test_bending_shapes_have_no_volume_reference(name, tmp_path_factory):
+    """The torus and the capsule bend: Taylor-Hood's net volume change is 0.1-0.5% of its gross one, and no two
+    references agree on it (same-mesh P2 0.29-1.28 times it; the capsule refined once 0.54-0.59 times), so the
+    comparison gives no relative error there rather than one that measures the reference."""
+    results = _volume_comparison(name, 0.49, str(tmp_path_factory.getbasetemp() / "fem-cache"))
+    assert results["models"]["smoothed"]["volume_change_error_vs_fem"] is None
+    fem = results["fem"]["TH"]
+    assert abs(fem["volume_change_m3"]) < 0.01 * fem["gross_volume_change_m3"]

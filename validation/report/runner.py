@@ -23,7 +23,7 @@ results.json layout (units in the key names: ``_m``, ``_m3``, ``_hz``, ``_pa``, 
   ``block_count``, ``nonzero_count``, ``unknown_count``, ``assembled_block_count``
   (:func:`validation.ladder.step_costs`); a rung that refuses the material: ``refused`` (its message) instead of numbers;
 - ``cases.<name>``: ``parameters``, ``mesh`` (node_count, tet_count, cells), ``analytic``,
-  ``fem.P2`` / ``fem.P1`` (tip_deflection_m, volume_change_m3, deformed_volume_change_m3, ...),
+  ``fem.P2`` / ``fem.P1`` (tip_deflection_m, volume_change_m3, deformed_volume_change_m3, gross_volume_change_m3, ...),
   ``springs.<rule>`` (tip_deflection_m, tip_deflection_error, rms_displacement_error,
   max_displacement_error, volume_change_m3, volume_change_error_vs_fem,
   volume_change_error_vs_analytic, solver, ...), ``models.<rung>`` (the same for each rung, or
@@ -285,7 +285,7 @@ def _compression_sweep(quick, rules, folder, note) -> dict:
                                         elements=("P2",), folder=folder)
             volume = comparison.case.mesh.volume
             rows.append({"nu": nu, "strain": strain, "analytic_volume_strain": (1 - 2 * nu) * strain,
-                         "fem_P2_volume_strain": comparison.results["fem"]["P2"]["deformed_volume_change_m3"] / volume,
+                         "fem_P2_volume_strain": comparison.results["fem"]["P2"]["volume_change_m3"] / volume,
                          **{f"springs_{rule}_volume_strain": comparison.results["springs"][rule]["volume_change_m3"]
                             / volume for rule in rules}})
     return {"cells": cells, "rows": rows}
