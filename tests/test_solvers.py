@@ -457,11 +457,28 @@ def test_the_galerkin_product_by_row_blocks_is_the_whole_product(system, monkeyp
     bit: each row of a scipy product comes from that row of the left factor alone."""
     matrix, modes, _ = system
     monkeypatch.setattr(amg, "GALERKIN_CHUNKS", chunks)
+    monkeypatch.setattr(amg, "GALERKIN_CHUNK_ROWS", 2)  # this system's R has fewer block rows than a piece's least
     level = amg._smoothed_aggregation(matrix, modes, theta=0.05, excluded=None, max_coarse=300).levels[0]
     assert level.R.shape[0] // level.R.blocksize[0] >= 2 * 8  # enough block rows to be split
     whole, pieces = level.R @ matrix @ level.P, amg._galerkin(level.R, matrix, level.P)
     assert pieces.format == "bsr" and pieces.blocksize == whole.blocksize and pieces.shape == whole.shape
     assert all(np.array_equal(getattr(pieces, part), getattr(whole, part)) for part in ("data", "indices", "indptr"))
+
+
+def test_a_small_galerkin_product_is_made_whole(system, monkeypatch):
+    """Fewer than two pieces' worth of block rows (:data:`amg.GALERKIN_CHUNK_ROWS`) take two products, not two per
+    piece: each piece pays scipy's fixed costs, which cost a 1k-node build 8% in eight pieces."""
+    matrix, modes, _ = system
+    level = amg._smoothed_aggregation(matrix, modes, theta=0.05, excluded=None, max_coarse=300).levels[0]
+    products = []
+    product = amg._product
+    monkeypatch.setattr(amg, "_product", lambda left, right: products.append(1) or product(left, right))
+    rows = level.R.shape[0] // level.R.blocksize[0]
+    for least, expected in ((rows // 2 + 1, 2), (rows // 3, 2 * 3)):
+        monkeypatch.setattr(amg, "GALERKIN_CHUNK_ROWS", least)
+        products.clear()
+        amg._galerkin(level.R, matrix, level.P)
+        assert len(products) == expected, (least, rows)
 
 
 @pytest.mark.parametrize("duplicates", [False, True])

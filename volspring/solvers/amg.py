@@ -1004,19 +1004,25 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
 #: The levels :meth:`AMGConjugateGradient.update` gives the change to, from the finest (never the coarsest, whose
 #: factorisation would be made again); the others keep the build's matrix (see there).
 UPDATE_DEPTH = 2
-#: The pieces :func:`_galerkin` splits R's block rows into (1: the whole product at once).
+#: The most pieces :func:`_galerkin` splits R's block rows into (1: the whole product at once) ...
 GALERKIN_CHUNKS = 8
+#: ... each of at least this many block rows. Below that the whole R A is small (under 0.4 MB a piece's worth here,
+#: at 10k nodes 4 MB) and each piece pays scipy's fixed costs of two products: split into 8 pieces, a build took
+#: 140 against 129-131 mat-vecs whole at 1k nodes and 142 against 138 at 10k (median of 6 alternating builds, stop
+#: 33; scratch ``build_levers.py``). The 200k-node beam's first coarse level still goes in 8 pieces.
+GALERKIN_CHUNK_ROWS = 500
 
 
 def _galerkin(restriction, matrix, prolongation):
-    """(R A) P, computed :data:`GALERKIN_CHUNKS` block rows of R at a time and the rows put together: the same arrays
-    as the whole product (scipy's products make each row from that row of the left factor alone), without R A whole
-    at once (1.9 KiB per node at 45k nodes, the build's peak: its rows are the 2-rings of the aggregates)."""
-    if GALERKIN_CHUNKS < 2 or restriction.format != "bsr" or \
-            restriction.shape[0] // restriction.blocksize[0] < 2 * GALERKIN_CHUNKS:
+    """(R A) P, computed :data:`GALERKIN_CHUNK_ROWS` or more block rows of R at a time (in at most
+    :data:`GALERKIN_CHUNKS` pieces) and the rows put together: the same arrays as the whole product (scipy's products
+    make each row from that row of the left factor alone), without R A whole at once (1.9 KiB per node at 45k nodes,
+    the build's peak: its rows are the 2-rings of the aggregates)."""
+    rows = restriction.shape[0] // restriction.blocksize[0] if restriction.format == "bsr" else 0
+    chunks = min(GALERKIN_CHUNKS, rows // max(GALERKIN_CHUNK_ROWS, 1))
+    if chunks < 2:
         return _product(_product(restriction, matrix), prolongation)
-    rows = restriction.shape[0] // restriction.blocksize[0]
-    bounds = np.linspace(0, rows, GALERKIN_CHUNKS + 1).astype(int)
+    bounds = np.linspace(0, rows, chunks + 1).astype(int)
     pieces = []
     for start, stop in zip(bounds[:-1], bounds[1:]):
         first, last = restriction.indptr[start], restriction.indptr[stop]
