@@ -143,8 +143,9 @@ class StaticSolution:
         exact model, which does not grow when it rotates, is to be compared with ``volume_change``), and for P2 and TH
         it ignores the edge dofs
     gross_volume_change : float
-        the integral of |div u| [m^3]: what the body's parts gain and lose before they cancel; ``volume_change`` is a
-        cancellation where it is a small share of this (:func:`volume_change_cancels`)
+        the integral of |div u| [m^3] (by the element's quadrature, exact where div u keeps its sign within a tet):
+        what the body's parts gain and lose before they cancel; ``volume_change`` is a cancellation where it is a
+        small share of this (:func:`volume_change_cancels`)
     reaction_force : (3,) float
         total force the clamps exert on the body [N]; at equilibrium minus the total applied load
     dofs : (N,) float
