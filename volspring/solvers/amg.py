@@ -1006,8 +1006,8 @@ def _smoothed_aggregation(matrix, near_null_space: np.ndarray, *, theta: float, 
 UPDATE_DEPTH = 2
 #: The most pieces :func:`_galerkin` splits R's block rows into (1: the whole product at once) ...
 GALERKIN_CHUNKS = 8
-#: ... each of at least this many block rows. Below that the whole R A is small (under 0.4 MB a piece's worth here,
-#: at 10k nodes 4 MB) and each piece pays scipy's fixed costs of two products: split into 8 pieces, a build took
+#: ... each of at least this many block rows. Below that the whole R A is small (about 1.9 KiB per node: 19 MB at
+#: 10k nodes) and each piece pays scipy's fixed costs of two products: split into 8 pieces, a build took
 #: 140 against 129-131 mat-vecs whole at 1k nodes and 142 against 138 at 10k (median of 6 alternating builds, stop
 #: 33; scratch ``build_levers.py``). The 200k-node beam's first coarse level still goes in 8 pieces.
 GALERKIN_CHUNK_ROWS = 500
