@@ -9,6 +9,9 @@ times in this process (CPU time, one thread):
 - ``ours``: :func:`volspring.solvers.amg._smoothed_aggregation`, the same hierarchy to rounding;
 - ``build()``: the whole :meth:`AMGConjugateGradient.build` (the set-up, the levels' triangles, the coarse LU),
   what a step that rebuilds pays;
+- ``coarse LU``: the factorisation of the coarsest level by pyamg's ``coarse_grid_solver("splu")`` (what the solver
+  used before) against the solver's own (``amg._CoarseLU``: its empty rows left out by index, in the level's own
+  column order where that pays), and one solve with each factorisation (both picking b's rows by index);
 
 each as the median over the rounds in mat-vecs with the same matrix, and the share of ``ours`` spent in scipy's
 block sparse products (the prolongation smoothing's A T and the Galerkin products R A P; none when the compiled
@@ -34,6 +37,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pyamg  # noqa: E402
+import scipy.sparse as sp  # noqa: E402
 import scipy.sparse._bsr as scipy_bsr  # noqa: E402
 
 from bench_warm_start import MATERIAL, matvec_seconds  # noqa: E402
@@ -42,7 +46,7 @@ from meshing.geometry import rigid_body_modes  # noqa: E402
 from volspring import Gravity, Model, Pins, Scene  # noqa: E402
 from volspring.integrators.implicit import ImplicitEuler  # noqa: E402
 from volspring.solvers import PROLONGATION_OMEGA, AMGConjugateGradient  # noqa: E402
-from volspring.solvers.amg import _smoothed_aggregation  # noqa: E402
+from volspring.solvers.amg import _CoarseLU, _coarse_solve, _smoothed_aggregation  # noqa: E402
 
 
 def pyamg_builder(matrix, modes):
@@ -59,6 +63,44 @@ def ours(matrix, modes):
 
 def whole_build(matrix, modes):
     AMGConjugateGradient(timer=time.process_time).build(matrix, modes)
+
+
+def by_index(solver):
+    """b -> pyamg's sparse LU solution with its kept rows picked and put back by index (how the solver applied
+    pyamg's factors before it made its own), not by pyamg's two products with its selection matrix."""
+    kept = sp.csc_matrix(solver.LU_Map).indices
+
+    def apply(b):
+        x = np.zeros(len(b))
+        x[kept] = solver.LU.solve(b[kept])
+        return x
+
+    return apply
+
+
+def coarse_lu_seconds(coarsest, rounds):
+    """Median CPU seconds of the coarsest level's factorisation and of one solve with it: pyamg's sparse LU and
+    ours, alternating."""
+    from types import SimpleNamespace
+
+    from pyamg.multilevel import coarse_grid_solver
+
+    vector = np.random.default_rng(0).standard_normal(coarsest.shape[0])
+    ways = {"pyamg": lambda: coarse_grid_solver("splu"), "ours": lambda: _CoarseLU(coarsest)}
+    factor, solve = {way: [] for way in ways}, {way: [] for way in ways}
+    for _ in range(rounds):
+        for way, make in ways.items():
+            start = time.process_time()
+            solver = make()
+            solver(coarsest, vector)  # pyamg's factorises at its first call
+            factor[way].append(time.process_time() - start)
+            apply = by_index(solver) if way == "pyamg" else \
+                _coarse_solve(SimpleNamespace(coarse_solver=solver, levels=[SimpleNamespace(A=coarsest)]))
+            start = time.process_time()
+            for _ in range(20):
+                apply(vector)
+            solve[way].append((time.process_time() - start) / 20)
+    return {way: (statistics.median(factor[way]), statistics.median(solve[way])) for way in ways}
 
 
 class ProductClock:
@@ -93,7 +135,7 @@ def main():
                              "--kernels numpy numba compares scipy's block products with the compiled ones")
     args = parser.parse_args()
     print(f"{'nodes':>8} {'kernels':>8} {'pyamg':>10} {'ours':>10} {'ratio':>6} {'build()':>10} "
-          f"{'scipy products in ours':>23}")
+          f"{'scipy products in ours':>23}   coarse LU, pyamg's / ours: factorisation, one solve")
     for k in args.cells:
         mesh = structured_box((5 * k, k, k), (1.0, 0.2, 0.2))
         model = Model.from_mesh(mesh, MATERIAL)
@@ -117,12 +159,18 @@ def main():
                 if name.startswith("ours"):
                     products[choice].append(clock.seconds / seconds[name][-1])
         pyamg_mv = statistics.median(seconds["pyamg"]) / mv
+        solver = AMGConjugateGradient()
+        solver.build(matrix, modes)
+        coarse = coarse_lu_seconds(solver.hierarchy.levels[-1].A, max(args.rounds, 5))
+        (theirs, their_solve), (own, own_solve) = coarse["pyamg"], coarse["ours"]
+        coarse_text = (f"   {theirs / mv:.1f} / {own / mv:.1f} mv ({own / theirs:.2f}), "
+                       f"{their_solve / mv:.2f} / {own_solve / mv:.2f} mv")
         for choice in args.kernels:
             kernels.select(choice)
             ours_mv, build_mv = (statistics.median(seconds[f"{name} {choice}"]) / mv for name in ("ours", "build"))
             print(f"{len(mesh.points):>8} {kernels.active():>8} {pyamg_mv:>7.0f} mv {ours_mv:>7.0f} mv "
-                  f"{ours_mv / pyamg_mv:>6.2f} {build_mv:>7.0f} mv {100 * statistics.median(products[choice]):>22.0f}%",
-                  flush=True)
+                  f"{ours_mv / pyamg_mv:>6.2f} {build_mv:>7.0f} mv {100 * statistics.median(products[choice]):>22.0f}%"
+                  + coarse_text, flush=True)
 
 
 if __name__ == "__main__":

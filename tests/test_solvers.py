@@ -86,10 +86,13 @@ def test_v_cycle_adapter_equals_pyamg_public_preconditioner_bit_for_bit(system, 
 
 
 def test_the_coarse_solve_is_pyamgs_sparse_lu_bit_for_bit_with_empty_columns_left_out():
-    """The coarsest level is solved by index where pyamg's LU solver multiplies by a selection matrix and its
-    transpose on every call: the same numbers, also when the coarsest matrix has empty rows and columns (a
-    candidate an aggregate cannot carry), which both leave out of the factors and answer with zeros."""
-    from pyamg.multilevel import MultilevelSolver
+    """The coarsest level is factorised and solved by index where pyamg's LU solver multiplies by a selection matrix
+    and its transpose: the same numbers as pyamg's in the same column order, also when the coarsest matrix has empty
+    rows and columns (a candidate an aggregate cannot carry), which both leave out of the factors and answer with
+    zeros."""
+    from types import SimpleNamespace
+
+    from pyamg.multilevel import MultilevelSolver, coarse_grid_solver
 
     generator = np.random.default_rng(6)
     root = generator.standard_normal((12, 12))
@@ -97,13 +100,36 @@ def test_the_coarse_solve_is_pyamgs_sparse_lu_bit_for_bit_with_empty_columns_lef
     dense[[3, 8], :] = dense[:, [3, 8]] = 0.0
     level = MultilevelSolver.Level()
     level.A = sp.csr_matrix(dense)
-    hierarchy = MultilevelSolver([level], coarse_solver="splu")
+    hierarchy = SimpleNamespace(levels=[level], coarse_solver=amg._CoarseLU(level.A))  # a coarsest level's solver
+    # Dense: the envelope of the 10 x 10 kept holds 45 of its 100 entries, so its own order.
+    theirs = coarse_grid_solver(("splu", {"permc_spec": "NATURAL"}))
     b = generator.standard_normal(12)
-    theirs = hierarchy.coarse_solver(level.A, b)
     ours = amg._coarse_solve(hierarchy)(b)
-    assert ours.tobytes() == theirs.tobytes() and ours[3] == ours[8] == 0.0
+    assert ours.tobytes() == theirs(level.A, b).tobytes() and ours[3] == ours[8] == 0.0
+    assert hierarchy.coarse_solver(level.A, b).tobytes() == ours.tobytes()  # called as pyamg calls it
     kept = [i for i in range(12) if i not in (3, 8)]
     np.testing.assert_allclose(dense[np.ix_(kept, kept)] @ ours[kept], b[kept], rtol=1e-12)  # and it solves
+
+
+def test_a_banded_coarsest_level_is_factorised_in_its_own_order_and_a_shuffled_one_is_not(system):
+    """The beam's pattern numbers nodes by reverse Cuthill-McKee and its aggregates follow them, so its coarsest
+    matrix is banded: factorised in its own order (cheaper than SuperLU's COLAMD, amg._column_order), with no more
+    fill than COLAMD gives it. The same matrix shuffled keeps COLAMD, where its own order would double the fill."""
+    import scipy.sparse.linalg as spla
+
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient()
+    solver.build(matrix, modes)
+    coarse = solver.hierarchy.coarse_solver
+    assert len(solver.hierarchy.levels) > 1 and coarse.kept is None
+    order = coarse.LU.perm_c
+    assert np.array_equal(order, np.arange(len(order)))  # COLAMD's would not be the identity
+    coarsest = sp.csc_matrix(solver.hierarchy.levels[-1].A)
+    assert coarse.LU.L.nnz <= spla.splu(coarsest, permc_spec="COLAMD").L.nnz
+    shuffle = np.random.default_rng(2).permutation(coarsest.shape[0])
+    shuffled = sp.csc_matrix(coarsest[shuffle][:, shuffle])
+    assert amg._column_order(shuffled) == "COLAMD"
+    assert spla.splu(shuffled, permc_spec="NATURAL").L.nnz > coarse.LU.L.nnz
 
 
 @pytest.mark.parametrize("smoother", SMOOTHERS)
