@@ -110,11 +110,13 @@ class _CoarseLU:
     Both factorise the matrix without its empty rows and columns (a level with several candidates per aggregate can
     have some). pyamg selects them by two products with a sparse selection matrix, at the factorisation and around
     every solve; here they are picked and put back by index, the same numbers bit for bit (the selection's entries
-    are ones): a V-cycle's coarse solve went from 52 to 30 us on the 936-node README beam (mat-vec 59 us), and the
-    factorisation from 8.8 to 4.9 ms on a 1,041-node gmsh beam's coarsest level (468 unknowns; mat-vec 0.15 ms).
-    The factorisation's column order is the level's own where it pays (:func:`_column_order`): 3.8 ms there.
-    Called as pyamg calls a coarse solver, ``solver(A, b)``, it solves with the factors of the matrix it was made
-    from (as pyamg's does after its first call).
+    are ones): a V-cycle's coarse solve went from 52 to 30 us on the 936-node README beam (mat-vec 59 us). The
+    factorisation's column order is the level's own where it pays (:func:`_column_order`). With both, the
+    factorisation of the README beam's coarsest level takes 0.53, 0.61 and 0.75 of pyamg's at 936, 10,309 and
+    44,541 nodes, and a solve is no dearer than one by index with pyamg's factors (0.38 against 0.46 mat-vecs at 936
+    nodes; ``python benchmarks/bench_amg_build.py``, stop 34). Called as pyamg calls a coarse solver,
+    ``solver(A, b)``, it solves with the factors of the matrix it was made from (as pyamg's does after its first
+    call).
 
     Raises RuntimeError where SuperLU finds the matrix singular.
     """
@@ -1235,7 +1237,8 @@ def _envelope(matrix) -> int:
     Positive Definite Systems*, 1981, ch. 4)."""
     if not isinstance(matrix, (sp.csr_matrix, sp.csc_matrix)):
         matrix = sp.csr_matrix(matrix)
-    matrix.sort_indices()  # a CSC matrix's columns are its transpose's rows: the same count for a symmetric pattern
+    if not matrix.has_sorted_indices:  # a CSC matrix's columns are its transpose's rows: the same count here
+        matrix = matrix.sorted_indices()  # a copy: the caller's matrix is left as it is
     rows = np.flatnonzero(np.diff(matrix.indptr))
     first = matrix.indices[matrix.indptr[rows]]
     return int(np.maximum(rows - first, 0).sum())
