@@ -1251,11 +1251,11 @@ def _column_order(coarsest) -> str:
     The aggregates of a level are numbered in the order of the nodes they grow from, and the pattern numbers the
     nodes by reverse Cuthill-McKee, so the coarsest matrix comes out banded: its envelope holds 0.56-0.59 times its
     entries on the gmsh beams of ``benchmarks/bench_implicit.py`` (468, 324 and 1,326 unknowns at 1k, 10k and 50k
-    nodes), 1.46-1.59 times once its rows and columns are shuffled. In its own order the factors there hold 10% fewer
+    nodes), 1.46-1.59 times once its rows and columns are shuffled. In its own order the factors there hold 5-11% fewer
     entries than COLAMD's and the factorisation takes 0.65-0.77 of the time (20.8 against 31.9 mat-vecs at 1k nodes,
     1.7 against 2.4 at 10k, 5.2 against 6.8 at 50k), the solves the same or less; COLAMD's own ordering pass is most of
     the difference (SuperLU's partial pivoting interchanged no rows there: the same fill as in its symmetric mode).
-    Shuffled, the natural order doubles the fill and the time."""
+    Shuffled, the natural order has 1.4-2.1 times COLAMD's fill and takes 1.6-2.0 times as long (50k and 1k nodes)."""
     return "NATURAL" if _envelope(coarsest) <= NATURAL_ORDER_ENVELOPE * coarsest.nnz else "COLAMD"
 
 
