@@ -134,6 +134,34 @@ def test_a_banded_coarsest_level_is_factorised_in_its_own_order_and_a_shuffled_o
     assert spla.splu(shuffled, permc_spec="NATURAL").L.nnz > coarse.LU.L.nnz
 
 
+def test_a_singular_coarsest_level_falls_back_to_the_pseudo_inverse(system):
+    """Where SuperLU finds the coarsest matrix singular (statics of a barely held body), the level is solved by
+    pyamg's pseudo-inverse instead, and the cycle stays finite. Here two of its rows and columns are made equal, so
+    that the elimination meets an exact zero pivot."""
+    from pyamg.multilevel import coarse_grid_solver
+
+    matrix, modes, _ = system
+    solver = AMGConjugateGradient()
+    solver.build(matrix, modes)
+    hierarchy = solver.hierarchy
+    coarsest = hierarchy.levels[-1].A
+    dense = coarsest.toarray()
+    dense[1, :], dense[:, 1] = dense[0, :], dense[:, 0]
+    singular = sp.bsr_matrix(dense, blocksize=coarsest.blocksize)
+    with pytest.raises(RuntimeError, match="singular"):
+        amg._CoarseLU(singular)
+    hierarchy.levels[-1].A = singular
+    solver._adopt(hierarchy)
+    assert not isinstance(hierarchy.coarse_solver, amg._CoarseLU)
+    b = singular @ np.random.default_rng(3).standard_normal(singular.shape[0])  # in the range: a solution exists
+    x = amg._coarse_solve(hierarchy)(b)
+    expected = coarse_grid_solver("pinv")(singular, b)
+    assert x.tobytes() == expected.tobytes()
+    # It solves: the pseudo-inverse's residual is rounding (measured 2.7e-15 relative; 1e-10 catches a wrong solver).
+    assert np.linalg.norm(singular @ x - b) <= 1e-10 * np.linalg.norm(b)
+    assert np.isfinite(solver.precondition(np.ones(matrix.shape[0]))).all()
+
+
 @pytest.mark.parametrize("smoother", SMOOTHERS)
 def test_every_smoother_makes_a_symmetric_positive_definite_v_cycle(system, smoother):
     """CG needs an SPD preconditioner: each forward sweep before the coarse correction is undone by a backward
