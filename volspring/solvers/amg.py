@@ -1231,13 +1231,11 @@ def _rows_picked(indptr: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def _envelope(matrix) -> int:
-    """Entries of the lower envelope of a sparse matrix with a symmetric pattern: per row, the columns from its first
-    entry to the diagonal (rows without an entry left of the diagonal add none). Factorised in its own order without
-    row interchanges, the lower factor has no entry outside it (George & Liu, *Computer Solution of Large Sparse
-    Positive Definite Systems*, 1981, ch. 4)."""
-    if not isinstance(matrix, (sp.csr_matrix, sp.csc_matrix)):
-        matrix = sp.csr_matrix(matrix)
-    if not matrix.has_sorted_indices:  # a CSC matrix's columns are its transpose's rows: the same count here
+    """Entries of the lower envelope of a CSR or CSC matrix with a symmetric pattern: per row, the columns from its
+    first entry to the diagonal (rows without an entry left of the diagonal add none). Factorised in its own order
+    without row interchanges, the lower factor has no entry outside it (George & Liu, *Computer Solution of Large
+    Sparse Positive Definite Systems*, 1981, ch. 4). A CSC matrix's columns are its transpose's rows: the same count."""
+    if not matrix.has_sorted_indices:
         matrix = matrix.sorted_indices()  # a copy: the caller's matrix is left as it is
     rows = np.flatnonzero(np.diff(matrix.indptr))
     first = matrix.indices[matrix.indptr[rows]]
@@ -1245,7 +1243,7 @@ def _envelope(matrix) -> int:
 
 
 def _column_order(coarsest) -> str:
-    """The column ordering sparse LU factorises the coarsest level in: its own (``"NATURAL"``) where its lower
+    """The column ordering sparse LU factorises the coarsest level (CSC) in: its own (``"NATURAL"``) where its lower
     envelope holds at most :data:`NATURAL_ORDER_ENVELOPE` times its entries, else SuperLU's COLAMD (scipy's default).
 
     The aggregates of a level are numbered in the order of the nodes they grow from, and the pattern numbers the
