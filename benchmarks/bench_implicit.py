@@ -124,7 +124,23 @@ def run(scene, dt, *, steps, **options):
     matrix, _, _ = integrator.linear_system(scene, state, dt)
     vector = np.random.default_rng(0).standard_normal(matrix.shape[0])
     matvec = median_seconds(lambda: matrix @ vector)
-    return np.array(records, dtype=float), matvec, state
+    return np.array(records, dtype=float), matvec, state, matrix
+
+
+def report_products(matrix, matvec):
+    """The step's products with its system in mat-vecs (scipy's product with one vector): CG's, one vector, and its
+    guess's, the last five velocity changes at once, as the step makes them (``volspring.solvers.krylov.times``: the
+    compiled kernel with the ``fast`` extra, else scipy's) and as scipy makes them."""
+    from volspring.solvers.krylov import times
+
+    rng = np.random.default_rng(1)
+    vector = rng.standard_normal(matrix.shape[0])
+    changes = rng.standard_normal((5, matrix.shape[0])).T  # as CG's guess holds them: the transpose of the history
+    ours = median_seconds(lambda: times(matrix, vector)) / matvec
+    ours_five = median_seconds(lambda: times(matrix, changes)) / matvec
+    scipy_five = median_seconds(lambda: matrix @ changes) / matvec
+    print(f"    system products (step / scipy): one vector {ours:.2f} / 1 mv, five vectors {ours_five:.2f} / "
+          f"{scipy_five:.2f} mv")
 
 
 def report_case(label, records, matvec, steps):
@@ -188,12 +204,13 @@ def main(argv=None):
               f"omega_max = {omega:.4g} rad/s, dt = {dt:.3g} s, h omega_max = {dt * omega:.1f} "
               f"(mesh + omega_max {time.perf_counter() - start:.1f} s)")
         for rtol in (1e-3, 1e-6):
-            records, matvec, state = run(scene, dt, steps=args.steps, rtol=rtol)
+            records, matvec, state, matrix = run(scene, dt, steps=args.steps, rtol=rtol)
             results[rtol].append(report_case(f"AMG-CG rtol {rtol:g}", records, matvec, args.steps))
+        report_products(matrix, matvec)
         tip = state.x[:, 2].min() - model.rest_positions[:, 2].min()
         print(f"    tip displacement after {args.steps} steps: {tip:.4g} m")
         if args.jacobi_steps:  # --jacobi-steps 0 leaves the comparison out
-            records, matvec, _ = run(scene, dt, steps=args.jacobi_steps, solver="jacobi", rtol=1e-3, maxiter=50000)
+            records, matvec, _, _ = run(scene, dt, steps=args.jacobi_steps, solver="jacobi", rtol=1e-3, maxiter=50000)
             iterations = records[:, 6].astype(int).tolist()
             print(f"  Jacobi-CG rtol 1e-3: iterations per step {iterations}, solve "
                   f"{np.median(records[:, 5]) * 1e3:.1f} ms = {np.median(records[:, 5]) / matvec:.0f} mv")

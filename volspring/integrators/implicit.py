@@ -63,6 +63,7 @@ from volspring.integrators.base import Integrator
 from volspring.integrators.cache import SolverCache
 from volspring.scene import Scene, State
 from volspring.solvers import LINEAR_SOLVERS, SolveInfo, make_linear_solver
+from volspring.solvers.krylov import times
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -564,7 +565,7 @@ def _projected_guess(system: _System, b: np.ndarray, history: np.ndarray) -> tup
     Directions the changes hardly span (energy below :data:`WARM_START_CUTOFF` of the largest) are left out; None
     when nothing is left."""
     vectors = history.T  # (N, k)
-    products, applied = system.matrix @ vectors, system.products  # the property builds a new operator per access
+    products, applied = times(system.matrix, vectors), system.products  # the property builds a new operator per access
     if applied is not None:
         products += applied @ vectors
     gram = vectors.T @ products
