@@ -322,6 +322,30 @@ def test_the_multigrid_hierarchy_is_the_same_bit_for_bit():
 
 
 @needs_numba
+def test_the_v_cycle_is_the_same_bit_for_bit():
+    """One V-cycle on a three-level hierarchy, its finest level swept, restricted and prolonged by the compiled
+    halves."""
+    from meshing.geometry import rigid_body_modes
+    from volspring.solvers.amg import AMGConjugateGradient, _CompiledFinest
+
+    scene = beam_scene((30, 6, 6))
+    matrix, _, pattern = ImplicitEuler().linear_system(scene, scene.initial_state(), 0.01)
+    modes = rigid_body_modes(scene.model.rest_positions[pattern.free_nodes])
+    r = np.random.default_rng(5).standard_normal(matrix.shape[0])
+
+    def cycle():
+        solver = AMGConjugateGradient(max_coarse=10)
+        solver.build(matrix, modes)
+        return solver.precondition(r), _CompiledFinest.of(solver.hierarchy.levels[0]) is not None, \
+            len(solver.hierarchy.levels)
+
+    (reference, numpy_halves, levels), (result, kernel_halves, _) = under_both(cycle)
+    assert levels >= 3
+    assert not numpy_halves and kernel_halves  # the comparison is of the compiled halves against numpy's cycle
+    assert_same_bits(reference, result)
+
+
+@needs_numba
 @pytest.mark.parametrize("rung", ["springs", "springs+volume", "smoothed"])
 def test_a_run_is_the_same_bit_for_bit_with_and_without_the_kernels(rung):
     """30 implicit steps of a 4,500-node beam under gravity, with dampers (damped springs, stiffness damping of the

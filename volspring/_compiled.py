@@ -13,8 +13,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["block_product", "block_product_rows", "block_times", "corotated_times", "jacobi_eigh",
-           "spring_linearization", "spring_stiffness_times"]
+__all__ = ["block_product", "block_product_rows", "block_times", "corotated_times", "finest_down", "finest_up",
+           "jacobi_eigh", "spring_linearization", "spring_stiffness_times"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -138,6 +138,66 @@ def block_times(indptr, indices, data, vectors, out):  # pragma: no cover (compi
                 out[c, first] = ((out[c, first] + a00 * x0) + a01 * x1) + a02 * x2
                 out[c, first + 1] = ((out[c, first + 1] + a10 * x0) + a11 * x1) + a12 * x2
                 out[c, first + 2] = ((out[c, first + 2] + a20 * x0) + a21 * x1) + a22 * x2
+
+
+@numba.njit(nogil=True, inline="always")
+def _gauss_seidel_row(indptr, indices, data, x, b, i, zero):  # pragma: no cover (compiled, inlined)
+    """pyamg's point-wise Gauss-Seidel update of row i of a CSR matrix (``amg_core.gauss_seidel``): the row's
+    off-diagonal products summed in storage order from zero, x_i = (b - sum) / diagonal, x_i left as it is where the
+    diagonal is zero or absent."""
+    total, diagonal = zero, zero
+    for entry in range(indptr[i], indptr[i + 1]):
+        j = indices[entry]
+        if j == i:
+            diagonal = data[entry]
+        else:
+            total += data[entry] * x[j]
+    if diagonal != 0.0:
+        x[i] = (b - total) / diagonal
+
+
+@_jit
+def finest_down(lower_indptr, lower_indices, lower_data, upper_indptr, upper_indices, upper_data, diagonal,
+                prolongation_indptr, prolongation_indices, prolongation_data, r, z, coarse,
+                zero):  # pragma: no cover (compiled; the fast tests compare the cycle with numpy's)
+    """The finest level's half of a V-cycle before the coarse correction, on point-wise triangles
+    (:class:`volspring.solvers.amg._Triangles`): a forward Gauss-Seidel sweep from ``z`` = 0 over the lower triangle,
+    then row by row the residual D z - U z and its restriction ``coarse`` += P^T residual. The same operations in
+    the same order as the numpy cycle: pyamg's sweep, scipy's CSR product for U z, and scipy's CSC product for R = P^T
+    (each coarse entry summed over the fine rows in order), so the same bits."""
+    n = r.shape[0]
+    for i in range(n):
+        _gauss_seidel_row(lower_indptr, lower_indices, lower_data, z, r[i], i, zero)
+    for i in range(n):
+        upper = zero
+        for entry in range(upper_indptr[i], upper_indptr[i + 1]):
+            upper += upper_data[entry] * z[upper_indices[entry]]
+        residual = diagonal[i] * z[i] - upper
+        for entry in range(prolongation_indptr[i], prolongation_indptr[i + 1]):
+            coarse[prolongation_indices[entry]] += prolongation_data[entry] * residual
+
+
+@_jit
+def finest_up(lower_indptr, lower_indices, lower_data, upper_indptr, upper_indices, upper_data, diagonal,
+              prolongation_indptr, prolongation_indices, prolongation_data, correction, r, z,
+              zero):  # pragma: no cover (compiled; the fast tests compare the cycle with numpy's)
+    """The finest level's half of a V-cycle after the coarse correction: ``z`` += P ``correction``, then a backward
+    Gauss-Seidel sweep over the upper triangle on r - (L z - D z), as the numpy cycle makes them (scipy's CSR
+    products, pyamg's sweep): the same bits."""
+    n = z.shape[0]
+    for i in range(n):
+        prolonged = zero
+        for entry in range(prolongation_indptr[i], prolongation_indptr[i + 1]):
+            prolonged += prolongation_data[entry] * correction[prolongation_indices[entry]]
+        z[i] = z[i] + prolonged
+    right = np.empty_like(z)  # the sweep's right-hand side in a pass of its own: the rows are independent there
+    for i in range(n):
+        lower = zero
+        for entry in range(lower_indptr[i], lower_indptr[i + 1]):
+            lower += lower_data[entry] * z[lower_indices[entry]]
+        right[i] = r[i] - (lower - diagonal[i] * z[i])
+    for i in range(n - 1, -1, -1):
+        _gauss_seidel_row(upper_indptr, upper_indices, upper_data, z, right[i], i, zero)
 
 
 @_jit
