@@ -156,6 +156,42 @@ def _gauss_seidel_row(indptr, indices, data, x, b, i, zero):  # pragma: no cover
         x[i] = (b - total) / diagonal
 
 
+@numba.njit(nogil=True, inline="always")
+def _row_sums(indptr, indices, data, x, row, zero):  # pragma: no cover (compiled, inlined)
+    """The products of rows ``row``, ``row`` + 1 and ``row`` + 2 of a CSR matrix with x, each summed from zero in
+    storage order (scipy's ``csr_matvec``), the three taken side by side so that their additions overlap."""
+    first, second, third, end = indptr[row], indptr[row + 1], indptr[row + 2], indptr[row + 3]
+    common = min(second - first, third - second, end - third)
+    a, b, c = zero, zero, zero
+    for k in range(common):
+        a += data[first + k] * x[indices[first + k]]
+        b += data[second + k] * x[indices[second + k]]
+        c += data[third + k] * x[indices[third + k]]
+    for entry in range(first + common, second):
+        a += data[entry] * x[indices[entry]]
+    for entry in range(second + common, third):
+        b += data[entry] * x[indices[entry]]
+    for entry in range(third + common, end):
+        c += data[entry] * x[indices[entry]]
+    return a, b, c
+
+
+@numba.njit(nogil=True, inline="always")
+def _row_sum(indptr, indices, data, x, row, zero):  # pragma: no cover (compiled, inlined)
+    """Row ``row`` of a CSR matrix times x, summed from zero in storage order."""
+    total = zero
+    for entry in range(indptr[row], indptr[row + 1]):
+        total += data[entry] * x[indices[entry]]
+    return total
+
+
+@numba.njit(nogil=True, inline="always")
+def _restrict_row(indptr, indices, data, value, row, coarse):  # pragma: no cover (compiled, inlined)
+    """coarse += value times row ``row`` of P: scipy's CSC product with R = P^T adds each fine row's share in order."""
+    for entry in range(indptr[row], indptr[row + 1]):
+        coarse[indices[entry]] += data[entry] * value
+
+
 @_jit
 def finest_down(lower_indptr, lower_indices, lower_data, upper_indptr, upper_indices, upper_data, diagonal,
                 prolongation_indptr, prolongation_indices, prolongation_data, r, z, coarse,
@@ -168,13 +204,18 @@ def finest_down(lower_indptr, lower_indices, lower_data, upper_indptr, upper_ind
     n = r.shape[0]
     for i in range(n):
         _gauss_seidel_row(lower_indptr, lower_indices, lower_data, z, r[i], i, zero)
-    for i in range(n):
-        upper = zero
-        for entry in range(upper_indptr[i], upper_indptr[i + 1]):
-            upper += upper_data[entry] * z[upper_indices[entry]]
-        residual = diagonal[i] * z[i] - upper
-        for entry in range(prolongation_indptr[i], prolongation_indptr[i + 1]):
-            coarse[prolongation_indices[entry]] += prolongation_data[entry] * residual
+    i = 0
+    while i + 3 <= n:
+        a, b, c = _row_sums(upper_indptr, upper_indices, upper_data, z, i, zero)
+        _restrict_row(prolongation_indptr, prolongation_indices, prolongation_data, diagonal[i] * z[i] - a, i, coarse)
+        _restrict_row(prolongation_indptr, prolongation_indices, prolongation_data, diagonal[i + 1] * z[i + 1] - b,
+                      i + 1, coarse)
+        _restrict_row(prolongation_indptr, prolongation_indices, prolongation_data, diagonal[i + 2] * z[i + 2] - c,
+                      i + 2, coarse)
+        i += 3
+    for i in range(i, n):
+        residual = diagonal[i] * z[i] - _row_sum(upper_indptr, upper_indices, upper_data, z, i, zero)
+        _restrict_row(prolongation_indptr, prolongation_indices, prolongation_data, residual, i, coarse)
 
 
 @_jit
@@ -183,19 +224,22 @@ def finest_up(lower_indptr, lower_indices, lower_data, upper_indptr, upper_indic
               zero):  # pragma: no cover (compiled; the fast tests compare the cycle with numpy's)
     """The finest level's half of a V-cycle after the coarse correction: ``z`` += P ``correction``, then a backward
     Gauss-Seidel sweep over the upper triangle on r - (L z - D z), as the numpy cycle makes them (scipy's CSR
-    products, pyamg's sweep): the same bits."""
+    products, pyamg's sweep): the same bits. The products take three rows at a time, each row's sum in its order."""
     n = z.shape[0]
-    for i in range(n):
-        prolonged = zero
-        for entry in range(prolongation_indptr[i], prolongation_indptr[i + 1]):
-            prolonged += prolongation_data[entry] * correction[prolongation_indices[entry]]
-        z[i] = z[i] + prolonged
+    whole = n - n % 3
+    for i in range(0, whole, 3):
+        a, b, c = _row_sums(prolongation_indptr, prolongation_indices, prolongation_data, correction, i, zero)
+        z[i], z[i + 1], z[i + 2] = z[i] + a, z[i + 1] + b, z[i + 2] + c
+    for i in range(whole, n):
+        z[i] = z[i] + _row_sum(prolongation_indptr, prolongation_indices, prolongation_data, correction, i, zero)
     right = np.empty_like(z)  # the sweep's right-hand side in a pass of its own: the rows are independent there
-    for i in range(n):
-        lower = zero
-        for entry in range(lower_indptr[i], lower_indptr[i + 1]):
-            lower += lower_data[entry] * z[lower_indices[entry]]
-        right[i] = r[i] - (lower - diagonal[i] * z[i])
+    for i in range(0, whole, 3):
+        a, b, c = _row_sums(lower_indptr, lower_indices, lower_data, z, i, zero)
+        right[i] = r[i] - (a - diagonal[i] * z[i])
+        right[i + 1] = r[i + 1] - (b - diagonal[i + 1] * z[i + 1])
+        right[i + 2] = r[i + 2] - (c - diagonal[i + 2] * z[i + 2])
+    for i in range(whole, n):
+        right[i] = r[i] - (_row_sum(lower_indptr, lower_indices, lower_data, z, i, zero) - diagonal[i] * z[i])
     for i in range(n - 1, -1, -1):
         _gauss_seidel_row(upper_indptr, upper_indices, upper_data, z, right[i], i, zero)
 

@@ -107,8 +107,9 @@ class _CompiledFinest:
     and :func:`~volspring._compiled.finest_up`), for the default smoother's level: point-wise triangles, a CSR
     prolongator P in their precision and R its transpose (a finest level held in double keeps its BSR P and the
     numpy cycle). The numpy cycle's arithmetic in the same order (the same bits), without its dozen Python calls and
-    temporaries per half: a V-cycle 5.9 -> 5.1 mat-vecs on the 1,041-node beam of ``python
-    benchmarks/bench_implicit.py``, 6.1 -> 5.6 on the 9,741-node one (scratch timing, stop 35)."""
+    temporaries per half, and with the products' rows taken three at a time: a V-cycle 5.9 -> 4.5 mat-vecs on the
+    1,041-node beam of ``python benchmarks/bench_implicit.py``, 6.1 -> 5.2 on the 9,741-node one (scratch timing,
+    stop 35)."""
 
     def __init__(self, kernels, triangles: _Triangles, prolongation: sp.csr_matrix):
         self.kernels = kernels
