@@ -6,6 +6,7 @@ from __future__ import annotations
 import copy
 import logging
 import time
+import weakref
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -68,11 +69,12 @@ def _v_cycle(hierarchy):
     def apply(r, index=0):
         level = levels[index]
         matrix = level.A
-        if index == 0 and finest is not None:
-            z, coarse = finest.down(r)
+        halves = finest.down(matrix, r) if index == 0 and finest is not None else None
+        if halves is not None:
+            z, coarse = halves
             coarse = coarse.astype(levels[1].A.dtype, copy=False)
             correction = coarse_solve(coarse) if last == 0 else apply(coarse, 1)
-            finest.up(correction, r, z)
+            finest.up(matrix, correction, r, z)
             return z
         if isinstance(matrix, _Triangles):
             z, residual = matrix.forward_from_zero(r)
@@ -109,40 +111,57 @@ class _CompiledFinest:
     numpy cycle). The numpy cycle's arithmetic in the same order (the same bits), without its dozen Python calls and
     temporaries per half, and with the products' rows taken three at a time: a V-cycle 5.9 -> 4.5 mat-vecs on the
     1,041-node beam of ``python benchmarks/bench_implicit.py``, 6.1 -> 5.2 on the 9,741-node one (scratch timing,
-    stop 35)."""
+    stop 35).
 
-    def __init__(self, kernels, triangles: _Triangles, prolongation: sp.csr_matrix):
+    Each half reads the triangles on the level when it runs, as the numpy cycle does: a contact step holds the built
+    ones plus the contact's change there (:meth:`AMGConjugateGradient.update`), its triangles in double where the
+    change is outside single precision's range, and those the numpy cycle sweeps (the prolongator stays as built)."""
+
+    def __init__(self, kernels, prolongation: sp.csr_matrix):
         self.kernels = kernels
-        lower, upper = triangles.lower, triangles.upper
-        self.arrays = (unsigned(lower.indptr), unsigned(lower.indices), lower.data, unsigned(upper.indptr),
-                       unsigned(upper.indices), upper.data, triangles.diagonal, unsigned(prolongation.indptr),
-                       unsigned(prolongation.indices), prolongation.data)
-        self.dtype = triangles.dtype
+        self.prolongation = (unsigned(prolongation.indptr), unsigned(prolongation.indices), prolongation.data)
+        self.dtype = prolongation.dtype
         self.zero = self.dtype.type(0.0)  # the kernels' sums start from a zero of the level's type
         self.coarse_size = prolongation.shape[1]
+        self._triangles, self._arrays = None, None  # (weak reference to) the triangles last swept, and their arrays
 
     @classmethod
     def of(cls, level) -> _CompiledFinest | None:
-        """The compiled halves for ``level`` where the kernels run and the level is held so, else None."""
+        """The compiled halves for ``level`` where the kernels run and its transfers are held so, else None."""
         kernels = compiled()
-        matrix, prolongation = level.A, getattr(level, "P", None)
-        if kernels is None or not isinstance(matrix, _Triangles) or matrix.inverse is not None or \
-                matrix.format != "csr" or prolongation is None or prolongation.format != "csr" or \
-                prolongation.dtype != matrix.dtype or not _transposed(level):
+        prolongation = getattr(level, "P", None)
+        if kernels is None or prolongation is None or prolongation.format != "csr" or not _transposed(level):
             return None
-        return cls(kernels, matrix, prolongation)
+        return cls(kernels, prolongation)
 
-    def down(self, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(z, R (r - A z)) for z the forward sweep from zero on A z = r, both in the level's precision."""
+    def _arrays_of(self, matrix) -> tuple | None:
+        """The kernels' arrays of the level's ``matrix`` with P's, or None where the halves do not apply to it."""
+        if self._triangles is not None and self._triangles() is matrix:
+            return self._arrays
+        arrays = None
+        if isinstance(matrix, _Triangles) and matrix.inverse is None and matrix.format == "csr" and \
+                matrix.dtype == self.dtype:
+            lower, upper = matrix.lower, matrix.upper
+            arrays = (unsigned(lower.indptr), unsigned(lower.indices), lower.data, unsigned(upper.indptr),
+                      unsigned(upper.indices), upper.data, matrix.diagonal) + self.prolongation
+        self._triangles, self._arrays = weakref.ref(matrix), arrays
+        return arrays
+
+    def down(self, matrix, r: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """(z, R (r - A z)) for z the forward sweep from zero on A z = r, both in the level's precision; None where
+        the halves do not apply to the level's ``matrix``."""
+        arrays = self._arrays_of(matrix)
+        if arrays is None:
+            return None
         r = np.asarray(r, dtype=self.dtype)
         z, coarse = np.zeros(r.shape, dtype=self.dtype), np.zeros(self.coarse_size, dtype=self.dtype)
-        self.kernels.finest_down(*self.arrays, r, z, coarse, self.zero)
+        self.kernels.finest_down(*arrays, r, z, coarse, self.zero)
         return z, coarse
 
-    def up(self, correction: np.ndarray, r: np.ndarray, z: np.ndarray) -> None:
-        """z += P correction, then the backward sweep on A z = r, in place."""
+    def up(self, matrix, correction: np.ndarray, r: np.ndarray, z: np.ndarray) -> None:
+        """z += P correction, then the backward sweep on A z = r, in place (after :meth:`down` on ``matrix``)."""
         correction = np.asarray(correction, dtype=self.dtype)
-        self.kernels.finest_up(*self.arrays, correction, np.asarray(r, dtype=self.dtype), z, self.zero)
+        self.kernels.finest_up(*self._arrays_of(matrix), correction, np.asarray(r, dtype=self.dtype), z, self.zero)
 
 
 def _coarse_solve(hierarchy):
