@@ -357,8 +357,8 @@ def test_the_v_cycle_is_the_same_bit_for_bit():
 def test_the_v_cycle_follows_an_update_of_the_levels_bit_for_bit():
     """A contact step holds the built matrix plus the contact's change on the finest level (``update``), and the
     built one again after (``restore``): the compiled halves read the level's matrix of the moment, as numpy's cycle
-    does. (Made from the matrices of the build, they preconditioned contact steps with the contact left out: 12.7 CG
-    iterations a step instead of 5.3 in ``bench_versions.py``'s contact scene.)"""
+    does. (Made from the matrices of the build, they preconditioned contact steps with the contact left out: 12.1-12.7
+    CG iterations a step instead of 5.3-5.8 in ``bench_versions.py``'s contact scene.)"""
     import scipy.sparse as sp
     from meshing.geometry import rigid_body_modes
     from volspring.solvers.amg import AMGConjugateGradient
@@ -411,8 +411,8 @@ def test_a_run_is_the_same_bit_for_bit_with_and_without_the_kernels(rung):
 @needs_numba
 def test_a_contact_run_is_the_same_bit_for_bit_with_and_without_the_kernels():
     """Two cubes pressed together by a strong gravity (``bench_versions.py``'s contact scene): the contact steps
-    update the hierarchy's finest levels, which the compiled V-cycle sweeps. This is the run that found the halves
-    sweeping the build's triangles instead (12.1 CG iterations a step instead of 5.8)."""
+    update the hierarchy's finest levels, which the compiled V-cycle sweeps. This is the scene that found the halves
+    sweeping the build's triangles instead (12.1-12.7 CG iterations a step instead of 5.3-5.8)."""
     from volspring.bodies import Body
     from volspring.collision import ContactForce
 

@@ -4,8 +4,10 @@ The implicit step spends a quarter of its time outside the linear solve, much of
 forces, Jacobian blocks and stiffness product, which numpy does as several passes over arrays of the
 springs' size (gathers, lengths, outer products, scatters), each with its own temporary; the upper
 rungs of the ladder add the polar decomposition of every tet's and node's deformation gradient,
-whose Jacobi rotations numpy does as dozens of vector operations a sweep; and an AMG build spends
-three quarters of its time in scipy's block sparse products, whose loops do not know the block sizes.
+whose Jacobi rotations numpy does as dozens of vector operations a sweep; an AMG build spends
+three quarters of its time in scipy's block sparse products, whose loops do not know the block sizes;
+and the solve spends its time in scipy's products with the 3x3-block system and in the multigrid
+cycle's finest level, a dozen Python calls and temporaries around each of its sweeps.
 With numba installed (``pip install 'volspring[fast]'``) the same arithmetic runs in compiled loops
 (:mod:`volspring._compiled`).
 
