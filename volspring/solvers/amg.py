@@ -69,13 +69,14 @@ def _v_cycle(hierarchy):
     def apply(r, index=0):
         level = levels[index]
         matrix = level.A
-        halves = finest.down(matrix, r) if index == 0 and finest is not None else None
-        if halves is not None:
-            z, coarse = halves
-            coarse = coarse.astype(levels[1].A.dtype, copy=False)
-            correction = coarse_solve(coarse) if last == 0 else apply(coarse, 1)
-            finest.up(matrix, correction, r, z)
-            return z
+        if index == 0 and finest is not None:
+            halves = finest.down(matrix, r)
+            if halves is not None:
+                z, coarse = halves
+                coarse = coarse.astype(levels[1].A.dtype, copy=False)
+                correction = coarse_solve(coarse) if last == 0 else apply(coarse, 1)
+                finest.up(matrix, correction, r, z)
+                return z
         if isinstance(matrix, _Triangles):
             z, residual = matrix.forward_from_zero(r)
         else:
@@ -123,7 +124,9 @@ class _CompiledFinest:
         self.dtype = prolongation.dtype
         self.zero = self.dtype.type(0.0)  # the kernels' sums start from a zero of the level's type
         self.coarse_size = prolongation.shape[1]
-        self._triangles, self._arrays = None, None  # (weak reference to) the triangles last swept, and their arrays
+        # (A weak reference to) the triangles last swept, and their arrays with P's (None: the halves do not apply).
+        self._triangles: weakref.ReferenceType | None = None
+        self._arrays: tuple | None = None
 
     @classmethod
     def of(cls, level) -> _CompiledFinest | None:
@@ -160,8 +163,10 @@ class _CompiledFinest:
 
     def up(self, matrix, correction: np.ndarray, r: np.ndarray, z: np.ndarray) -> None:
         """z += P correction, then the backward sweep on A z = r, in place (after :meth:`down` on ``matrix``)."""
+        arrays = self._arrays_of(matrix)
+        assert arrays is not None  # down() ran on the same matrix
         correction = np.asarray(correction, dtype=self.dtype)
-        self.kernels.finest_up(*self._arrays_of(matrix), correction, np.asarray(r, dtype=self.dtype), z, self.zero)
+        self.kernels.finest_up(*arrays, correction, np.asarray(r, dtype=self.dtype), z, self.zero)
 
 
 def _coarse_solve(hierarchy):
