@@ -149,6 +149,7 @@ class _System:
     preconditioner_matrix: Callable[[], sp.bsr_matrix] | None = None  # () -> the matrix with their stand-in blocks
     folded: np.ndarray | None = None  # (f, 3) the scene forces' diagonal Jacobian term, folded into the matrix
     touched: int = 0  # free unknowns on which the scene forces' Jacobian has a row (contact's grow and shrink)
+    stiffness_times: np.ndarray | None = None  # (n, 3) the element sets' dF/dx @ u for _assemble's ``times``
 
     def with_held(self, b) -> np.ndarray:
         """The right-hand side ``b`` with the held unknowns' rows set (see :func:`eliminate_held`)."""
@@ -290,8 +291,9 @@ class ImplicitEuler(Integrator):
         """The block pattern for this scene's model and supports, built once and cached."""
         return (self.cache if cache is None else cache).pattern_for(scene)
 
-    def _assemble(self, scene, pattern, x, v, t, h, prescribed=None) -> _System:
-        """Forces and the system matrix at (x, v, t) for step h.
+    def _assemble(self, scene, pattern, x, v, t, h, prescribed=None, times=None) -> _System:
+        """Forces and the system matrix at (x, v, t) for step h (and the element sets' dF/dx @ ``times``, (n, 3), when
+        it is given: the step's right-hand side).
 
         The element sets' forces come out of the same pass as their blocks
         (:meth:`BlockPattern.linearize`), then the scene adds the external forces, so ``forces``
@@ -303,6 +305,9 @@ class ImplicitEuler(Integrator):
                                     clamp_compression=self.clamp_compression)
         forces = scene.external_forces(x, v, t, out=springs.forces)
         clock = self.timer()
+        # Before the matrix: the product's temporaries and the assembled blocks are then never alive at once (the
+        # step's peak memory, at the matrix's assembly; 0.4 KiB per node less for the springs at 45k nodes).
+        stiffness_times = None if times is None else pattern.dfdx_times(springs, times)
         dfdx, dfdv = scene.external_jacobian(x, v, t)
         diagonal = scene.model.masses[pattern.free_nodes]
         extra = extra_full = folded = None
@@ -343,7 +348,7 @@ class ImplicitEuler(Integrator):
             held_rhs = np.where(held, 0.0, -coupling)
         return _System(matrix, extra, springs, forces, self.timer() - clock, extra_full,
                        None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs, operator,
-                       None if operator is None else preconditioner, folded, touched)
+                       None if operator is None else preconditioner, folded, touched, stiffness_times)
 
     def linear_system(self, scene: Scene, state: State,
                       dt: float) -> tuple[sparse.spmatrix, sparse.spmatrix | None, BlockPattern]:
@@ -419,13 +424,14 @@ class ImplicitEuler(Integrator):
             v1[held] = (target[held] - x0[held]) / h
             dv_prescribed[held] = v1[held] - v0[held]
         clock = self.timer()
-        system = self._assemble(scene, pattern, x0, v0, t0, h, dv_prescribed)
+        system = self._assemble(scene, pattern, x0, v0, t0, h, dv_prescribed, times=v0)
         f0 = system.forces
         forces_seconds = self.timer() - clock - system.assembly_seconds
         clock = self.timer()
         linearization = system.springs
         assert linearization is not None  # None only once used, below
-        rhs = h * f0 + (h * h) * pattern.dfdx_times(linearization, v0)
+        assert system.stiffness_times is not None
+        rhs = h * f0 + (h * h) * system.stiffness_times
         if system.extra_dfdx is not None:
             rhs += (h * h) * (system.extra_dfdx @ v0.ravel()).reshape(-1, 3)
         if dv_prescribed.any():
