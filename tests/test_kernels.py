@@ -149,7 +149,7 @@ def test_spring_forces_blocks_and_products_are_numpys_bit_for_bit(with_velocitie
     (numpy_lin, numpy_product), (kernel_lin, kernel_product) = under_both(linearized)
     transverse = 1.0 - springs.rest_lengths / numpy_lin.lengths
     assert (transverse < 0).any() and (transverse > 0).any()  # compressed and stretched springs both
-    for name in ("forces", "blocks", "directions", "lengths", "transverse"):
+    for name in ("forces", "blocks", "directions", "lengths", "transverse", "along"):
         assert_same_bits(getattr(numpy_lin, name), getattr(kernel_lin, name))
     assert_same_bits(numpy_product, kernel_product)
 
@@ -442,7 +442,12 @@ def test_the_matrix_is_the_same_bit_for_bit():
     x, v = disturbed(scene.model, 0.005, seed=3)
 
     def data():
-        return pattern.data(pattern.linearize(x, v, stiffness_scale=1e-4, damping_scale=1e-2),
-                            scene.model.masses[pattern.free_nodes])
+        linearization = pattern.linearize(x, v, stiffness_scale=1e-4, damping_scale=1e-2)
+        return pattern.data(linearization, scene.model.masses[pattern.free_nodes]), linearization
 
-    assert_same_bits(*under_both(data))
+    (reference, _), (data, linearization) = under_both(data)
+    assert_same_bits(reference, data)
+    # The kernel summed each spring's block where it made it: the blocks were never stored beside the matrix (the
+    # step's peak memory).
+    springs, = linearization.parts
+    assert springs._blocks is None

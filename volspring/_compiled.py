@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 __all__ = ["block_product", "block_product_rows", "block_times", "corotated_times", "finest_down", "finest_up",
-           "jacobi_eigh", "spring_linearization", "spring_stiffness_times"]
+           "jacobi_eigh", "spring_block_sum", "spring_linearization", "spring_stiffness_times"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -28,14 +28,15 @@ def _jit(function):
 
 @_jit
 def spring_linearization(x, v, pairs, stiffness, damping, rest_lengths, stiffness_scale, damping_scale, clamp,
-                         incidence_indptr, incidence_indices, incidence_data, forces, blocks, directions, lengths,
+                         incidence_indptr, incidence_indices, incidence_data, forces, along_out, directions, lengths,
                          transverse):  # pragma: no cover (compiled; the fast tests compare it with numpy)
-    """Forces and blocks of :meth:`volspring.elements.Springs.linearize` in one pass over the springs.
+    """Forces and what makes the blocks of :meth:`volspring.elements.Springs.linearize`, in one pass over the springs.
 
     ``v`` with no rows means no velocities (the dampers exert no force); ``damping_scale`` 0 leaves the dampers
-    out of the blocks. Writes ``forces`` (n, 3), ``blocks`` (s, 3, 3), ``directions`` (s, 3), ``lengths`` and
-    ``transverse`` (s,), as the numpy code computes them, and returns how many springs have no positive length
-    (whose outputs are then inf or NaN, as numpy's would be).
+    out of the blocks. Writes ``forces`` (n, 3), ``along_out`` (s,) (the coefficient of r r^T in a block),
+    ``directions`` (s, 3), ``lengths`` and ``transverse`` (s,), as the numpy code computes them (the blocks are
+    summed from them by :func:`spring_block_sum`), and returns how many springs have no positive length (whose
+    outputs are then inf or NaN, as numpy's would be).
     """
     s = pairs.shape[0]
     along_forces = np.empty((s, 3))
@@ -65,13 +66,39 @@ def spring_linearization(x, v, pairs, stiffness, damping, rest_lengths, stiffnes
         along = stiffness_scale * (stiffness[e] - t)
         if damping_scale != 0.0:
             along += damping_scale * damping[e]
-        a0, a1, a2 = along * r0, along * r1, along * r2
-        diagonal = stiffness_scale * t
-        blocks[e, 0, 0], blocks[e, 0, 1], blocks[e, 0, 2] = r0 * a0 + diagonal, r0 * a1, r0 * a2
-        blocks[e, 1, 0], blocks[e, 1, 1], blocks[e, 1, 2] = r1 * a0, r1 * a1 + diagonal, r1 * a2
-        blocks[e, 2, 0], blocks[e, 2, 1], blocks[e, 2, 2] = r2 * a0, r2 * a1, r2 * a2 + diagonal
+        along_out[e] = along
     _csr_times(incidence_indptr, incidence_indices, incidence_data, along_forces, forces)
     return collapsed
+
+
+@_jit
+def spring_block_sum(indptr, indices, signs, directions, along, transverse, stiffness_scale,
+                     out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """``out = summation @ blocks.reshape(-1, 9)`` for the springs' blocks r (along r)^T + stiffness_scale
+    transverse I (:meth:`volspring.elements.springs.SpringLinearization.summed`), each block made where it is summed
+    instead of stored: the summation is CSR (``indptr``, ``indices``, ``signs``), rows the pattern's blocks, columns
+    the springs; ``out`` is (rows, 9). Each block entry and each row's sum as numpy makes them (the entry
+    r_a (along r_b), the diagonal's added after; the row's sum from zero in the entries' order, scipy's)."""
+    for row in range(indptr.shape[0] - 1):
+        s0 = s1 = s2 = s3 = s4 = s5 = s6 = s7 = s8 = 0.0
+        for entry in range(indptr[row], indptr[row + 1]):
+            e, sign = indices[entry], signs[entry]
+            r0, r1, r2 = directions[e, 0], directions[e, 1], directions[e, 2]
+            a = along[e]
+            a0, a1, a2 = a * r0, a * r1, a * r2
+            diagonal = stiffness_scale * transverse[e]
+            s0 += sign * (r0 * a0 + diagonal)
+            s1 += sign * (r0 * a1)
+            s2 += sign * (r0 * a2)
+            s3 += sign * (r1 * a0)
+            s4 += sign * (r1 * a1 + diagonal)
+            s5 += sign * (r1 * a2)
+            s6 += sign * (r2 * a0)
+            s7 += sign * (r2 * a1)
+            s8 += sign * (r2 * a2 + diagonal)
+        out[row, 0], out[row, 1], out[row, 2] = s0, s1, s2
+        out[row, 3], out[row, 4], out[row, 5] = s3, s4, s5
+        out[row, 6], out[row, 7], out[row, 8] = s6, s7, s8
 
 
 @_jit

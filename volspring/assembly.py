@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring._deprecation import deprecated_alias
-from volspring.elements.base import BlockMap
+from volspring.elements.base import BlockMap, Linearization
 from volspring.errors import SpringCollapsed
 from typing import TYPE_CHECKING, Any, Protocol, cast
 
@@ -334,12 +334,14 @@ class BlockPattern:
             add the stand-in blocks of the sets applied as products (the matrix to build a preconditioner from); without
             it they add nothing (see :meth:`operator`)
         """
+        # Per set, its linearization (which sums its own blocks: the springs' need not be stored), or blocks, or None.
         blocks = [linearization] if isinstance(linearization, np.ndarray) else \
-            [lin.blocks if not part.operator else lin.preconditioner_blocks() if preconditioner else None
+            [lin if not part.operator else lin.preconditioner_blocks() if preconditioner else None
              for part, lin in zip(self.parts, linearization.parts)]
         if len(blocks) != len(self.parts):
             raise ValueError(f"{len(blocks)} block arrays for a model with {len(self.parts)} element sets")
-        products = (part.summation @ np.reshape(part_blocks, (-1, 9))
+        products = (part_blocks.summed(part.summation) if isinstance(part_blocks, Linearization) else
+                    part.summation @ np.reshape(part_blocks, (-1, 9))
                     for part, part_blocks in zip(self.parts, blocks) if part_blocks is not None)
         data = next(products, None)
         data = np.zeros((self.block_count, 9)) if data is None else data

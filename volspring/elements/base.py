@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+import scipy.sparse as sp
 from collections.abc import Callable
 __all__ = ["BlockMap", "ElementSet", "Linearization", "OperatorLinearization"]
 
@@ -90,6 +91,13 @@ class Linearization:
     def dfdx_times(self, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- dF/dx @ u: the change of the set's forces per unit displacement u [N]."""
         return -_block_product(self.element_set, self.stiffness, u)
+
+    def summed(self, summation: sp.csr_matrix) -> np.ndarray:
+        """(m, 9) float -- ``summation @ blocks.reshape(-1, 9)``: the blocks summed into m blocks of a matrix by a sparse
+        (m, e b) summation (:class:`volspring.assembly.BlockPattern`'s)."""
+        if self.blocks is None:
+            raise ValueError(f"the {self.element_set.name or 'element'} set's linearization has no blocks to sum")
+        return summation @ np.reshape(self.blocks, (-1, 9))
 
 
 class OperatorLinearization(Linearization):

@@ -166,26 +166,23 @@ class Springs(ElementSet):
         along = stiffness_scale * (self.stiffness - transverse)
         if damping_scale:
             along += damping_scale * self.damping
-        # einsum forms the outer products r (along r)^T in 0.7 of the broadcast product's time (65k springs)
-        blocks = np.einsum("ij,ik->ijk", r, along[:, None] * r)
-        blocks.reshape(-1, 9)[:, ::4] += (stiffness_scale * transverse)[:, None]
-        return SpringLinearization(forces, blocks, None, self, r, length, self.stiffness, transverse)
+        return SpringLinearization(forces, self, r, length, self.stiffness, transverse, along, stiffness_scale)
 
     def _compiled_linearization(self, kernels, x, v, stiffness_scale, damping_scale, clamp_compression):
         """:meth:`linearize` by the compiled kernel (:mod:`volspring.kernels`): the same numbers, one pass."""
         n, s = self.node_count, self.spring_count
         x = _node_array("x", x, n)
         v = _NO_VELOCITIES if v is None or not self._damped else _node_array("v", v, n)
-        forces, blocks, r = np.empty((n, 3)), np.empty((s, 3, 3)), np.empty((s, 3))
-        length, transverse = np.empty(s), np.empty(s)
+        forces, r = np.empty((n, 3)), np.empty((s, 3))
+        length, transverse, along = np.empty(s), np.empty(s), np.empty(s)
         incidence = self.incidence
         if kernels.spring_linearization(x, v, unsigned(self.pairs), self.stiffness, self.damping, self.rest_lengths,
                                         stiffness_scale, damping_scale, clamp_compression, unsigned(incidence.indptr),
-                                        unsigned(incidence.indices), incidence.data, forces, blocks, r, length,
+                                        unsigned(incidence.indices), incidence.data, forces, along, r, length,
                                         transverse):
             e = int(np.argmin(length))  # the spring numpy's check names (_directions)
             raise SpringCollapsed(e, *self.pairs[e])
-        return SpringLinearization(forces, blocks, None, self, r, length, self.stiffness, transverse)
+        return SpringLinearization(forces, self, r, length, self.stiffness, transverse, along, stiffness_scale)
 
     @cached_property
     def _damped(self) -> bool:
@@ -281,7 +278,8 @@ class SpringLinearization(Linearization):
     forces : (n, 3) float
         spring (and damper, if velocities were given) forces on the nodes [N]
     blocks : (s, 3, 3) float
-        W_e = c_K H_e + c_D D_e
+        W_e = c_K H_e + c_D D_e = along_e r r^T + c_K transverse_e I, made at the first access: the implicit step sums
+        them into its matrix without storing them where the compiled kernels run (:meth:`summed`)
     directions : (s, 3) float
         unit vectors r_e from i to j
     lengths : (s,) float
@@ -290,15 +288,50 @@ class SpringLinearization(Linearization):
         k_e, coefficient of r r^T in H_e [N/m]
     transverse : (s,) float
         k_e (1 - l0/l), clamped if asked: coefficient of the transverse projector I - r r^T in H_e [N/m]
+    along : (s,) float
+        c_K (k_e - transverse_e) + c_D k_d, the coefficient of r r^T in W_e [N/m]
+    stiffness_scale : float
+        c_K
     """
 
-    blocks: np.ndarray  # always assembled (never None, unlike a general Linearization's)
     element_set: Springs
+    _blocks: np.ndarray | None
 
-    def __init__(self, forces: np.ndarray, blocks: np.ndarray, stiffness: np.ndarray | None, element_set: Springs,
-                 directions: np.ndarray, lengths: np.ndarray, axial: np.ndarray, transverse: np.ndarray):
-        super().__init__(forces, blocks, stiffness, element_set)
+    def __init__(self, forces: np.ndarray, element_set: Springs, directions: np.ndarray, lengths: np.ndarray,
+                 axial: np.ndarray, transverse: np.ndarray, along: np.ndarray, stiffness_scale: float):
+        super().__init__(forces, None, None, element_set)
         self.directions, self.lengths, self.axial, self.transverse = directions, lengths, axial, transverse
+        self.along, self.stiffness_scale = along, float(stiffness_scale)
+
+    @property
+    def blocks(self) -> np.ndarray:
+        if self._blocks is None:
+            # einsum forms the outer products r (along r)^T in 0.7 of the broadcast product's time (65k springs)
+            blocks = np.einsum("ij,ik->ijk", self.directions, self.along[:, None] * self.directions)
+            blocks.reshape(-1, 9)[:, ::4] += (self.stiffness_scale * self.transverse)[:, None]
+            self._blocks = blocks
+        return self._blocks
+
+    @blocks.setter
+    def blocks(self, value: np.ndarray | None) -> None:
+        self._blocks = value
+
+    def summed(self, summation: sp.csr_matrix) -> np.ndarray:
+        """``summation @ blocks.reshape(-1, 9)``; where the compiled kernels run and the blocks were not made, each
+        block is made where it is summed (:func:`volspring._compiled.spring_block_sum`, the same bits): the step's
+        matrix is then assembled without the springs' 72 bytes each beside it (its peak memory)."""
+        kernels = compiled()
+        if kernels is None or self._blocks is not None:
+            return super().summed(summation)
+        summation = sp.csr_matrix(summation)
+        if summation.shape[1] != len(self.along):  # the kernel does not check its indices
+            raise ValueError(f"the summation has {summation.shape[1]} columns; expected {len(self.along)}, one per "
+                             "spring")
+        out = np.empty((summation.shape[0], 9))
+        kernels.spring_block_sum(unsigned(summation.indptr), unsigned(summation.indices),
+                                 np.asarray(summation.data, dtype=np.float64), self.directions, self.along,
+                                 self.transverse, self.stiffness_scale, out)
+        return out
 
     def dfdx_times(self, u: np.ndarray) -> np.ndarray:
         """(n, 3) float -- dF/dx @ u [N]: H_e (u_j - u_i) = (k - k_t) r (r . du) + k_t du, added
