@@ -217,13 +217,22 @@ def test_the_jacobi_eigensolver_is_numpys_bit_for_bit():
 
 
 @needs_numba
-def test_the_corotation_is_numpys_bit_for_bit_inverted_tets_included():
-    from volspring.elements.tet_kinematics import corotated
+@pytest.mark.parametrize("project", [True, False])
+def test_the_corotation_is_numpys_bit_for_bit_inverted_tets_included(project):
+    from volspring.elements.tet_kinematics import corotated, twist_rows
 
     rng = np.random.default_rng(5)
     F = np.eye(3) + 0.2 * rng.standard_normal((2000, 3, 3))
     F[:20, :, 2] *= -1.0  # inverted: LAPACK's path for these, the Jacobi path for the rest
-    numpy_result, kernel_result = under_both(lambda: corotated(F))
+    F[20] = np.diag([1.0, 1.0, 1e-3])  # nearly flat (LAPACK's path too)
+    F[21] = np.diag([1.0, -1.0, 1.0])  # reflected: s_i + s_j = 0 for two twists
+    vectors = rng.standard_normal((2000, 4, 3))
+
+    def corotation():
+        U, Vt, psi, P, coefficients = corotated(F, project=project)
+        return U, Vt, psi, P, coefficients, twist_rows(U, Vt, vectors)
+
+    numpy_result, kernel_result = under_both(corotation)
     for reference, result in zip(numpy_result, kernel_result):
         assert_same_bits(reference, result)
 

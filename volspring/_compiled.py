@@ -13,8 +13,9 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["block_product", "block_product_rows", "block_times", "corotated_times", "finest_down", "finest_up",
-           "jacobi_eigh", "spring_block_sum", "spring_linearization", "spring_stiffness_times"]
+__all__ = ["block_product", "block_product_rows", "block_times", "corotated_parts", "corotated_times", "finest_down",
+           "finest_up", "jacobi_eigh", "polar_fast", "spring_block_sum", "spring_linearization",
+           "spring_stiffness_times", "twist_rows"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -331,6 +332,76 @@ def _rotate(app, aqq, apq, arp, arq, v0p, v0q, v1p, v1q, v2p, v2q):  # pragma: n
             xp, xq = first[k], second[k]
             first[k] = c * xp - s * xq
             second[k] = s * xp + c * xq
+
+
+@_jit
+def polar_fast(F, entries, vectors, converged, condition_squared, U, s, Vt):  # pragma: no cover (compiled)
+    """:func:`volspring.elements.tet_kinematics._polar_fast` per matrix: writes U, s and V^T of every (m, 3, 3) ``F``
+    from the Jacobi rotations' rows (``entries`` (6, m), ``vectors`` (9, m), ``converged``) and returns which F take
+    the fast path. The same operations: det F by the rule of Sarrus (``_det3``), the eigenvalues within
+    ``condition_squared`` of each other (min * c > max, as every pair: false as numpy's with a NaN), U's entries
+    summed in the same order."""
+    m = F.shape[0]
+    fast = np.empty(m, dtype=np.bool_)
+    for k in range(m):
+        det = (F[k, 0, 0] * (F[k, 1, 1] * F[k, 2, 2] - F[k, 1, 2] * F[k, 2, 1])
+               - F[k, 0, 1] * (F[k, 1, 0] * F[k, 2, 2] - F[k, 1, 2] * F[k, 2, 0])
+               + F[k, 0, 2] * (F[k, 1, 0] * F[k, 2, 1] - F[k, 1, 1] * F[k, 2, 0]))
+        values = (entries[0, k], entries[3, k], entries[5, k])
+        wide = True
+        for low in values:
+            for high in values:
+                if not low * condition_squared > high:
+                    wide = False
+        is_fast = converged[k] and det > 0.0 and wide
+        fast[k] = is_fast
+        for c in range(3):
+            value = values[c]
+            # np.maximum(value, 0): value where value >= 0 or NaN
+            root = np.sqrt(value if value >= 0.0 or np.isnan(value) else 0.0)
+            s[k, c] = root
+            divisor = root if is_fast else 1.0
+            for i in range(3):
+                U[k, i, c] = ((F[k, i, 0] * vectors[c, k] + F[k, i, 1] * vectors[3 + c, k])
+                              + F[k, i, 2] * vectors[6 + c, k]) / divisor
+                Vt[k, c, i] = vectors[3 * i + c, k]
+    return fast
+
+
+@_jit
+def corotated_parts(F, U, s, Vt, project, psi, P, coefficients):  # pragma: no cover (compiled)
+    """The rest of :func:`volspring.elements.tet_kinematics.corotated` per matrix, the same operations: psi = |s - 1|^2,
+    P = 2 (F - U V^T) and the twist coefficients c_r = 2 / (s_i + s_j) (clamped at 1 with ``project``)."""
+    for k in range(F.shape[0]):
+        d0, d1, d2 = s[k, 0] - 1.0, s[k, 1] - 1.0, s[k, 2] - 1.0
+        psi[k] = (d0 * d0 + d1 * d1) + d2 * d2
+        for i in range(3):
+            for j in range(3):
+                rotation = (U[k, i, 0] * Vt[k, 0, j] + U[k, i, 1] * Vt[k, 1, j]) + U[k, i, 2] * Vt[k, 2, j]
+                P[k, i, j] = 2.0 * (F[k, i, j] - rotation)
+        for r in range(3):
+            i, j = (0, 0, 1)[r], (1, 2, 2)[r]
+            total = s[k, i] + s[k, j]
+            if project:
+                coefficients[k, r] = 2.0 / total if total > 2.0 else 1.0
+            else:
+                coefficients[k, r] = 2.0 / total if total != 0.0 else 1.0
+
+
+@_jit
+def twist_rows(U, Vt, vectors, half_root, out):  # pragma: no cover (compiled)
+    """:func:`volspring.elements.tet_kinematics.twist_rows` per matrix, the same operations: writes q_r a into ``out``
+    (m, 3, k, 3) for the k vectors a of each matrix (``vectors`` (m, k, 3))."""
+    for t in range(vectors.shape[0]):
+        for a in range(vectors.shape[1]):
+            g0, g1, g2 = vectors[t, a, 0], vectors[t, a, 1], vectors[t, a, 2]
+            along0 = ((g0 * Vt[t, 0, 0] + g1 * Vt[t, 0, 1]) + g2 * Vt[t, 0, 2]) * half_root
+            along1 = ((g0 * Vt[t, 1, 0] + g1 * Vt[t, 1, 1]) + g2 * Vt[t, 1, 2]) * half_root
+            along2 = ((g0 * Vt[t, 2, 0] + g1 * Vt[t, 2, 1]) + g2 * Vt[t, 2, 2]) * half_root
+            for c in range(3):
+                out[t, 0, a, c] = along1 * U[t, c, 0] - along0 * U[t, c, 1]
+                out[t, 1, a, c] = along2 * U[t, c, 0] - along0 * U[t, c, 2]
+                out[t, 2, a, c] = along2 * U[t, c, 1] - along1 * U[t, c, 2]
 
 
 @_jit

@@ -36,6 +36,7 @@ __all__ = ["SmoothingDomains", "TetGradients", "corotated", "corotational", "dom
            "pair_nodes", "rotation_preserving_svd", "twist_directions", "twist_rows"]
 
 _TWIST_PAIRS = ((0, 1), (0, 2), (1, 2))
+_HALF_ROOT = 1.0 / np.sqrt(2.0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -129,7 +130,17 @@ def _symmetric(i, j):
 
 def _jacobi_eigh(C, sweeps=_JACOBI_SWEEPS):
     """Eigenvalues (m, 3) and eigenvectors (m, 3, 3) of symmetric 3x3 matrices by cyclic Jacobi rotations,
-    and whether each converged (off-diagonal below 1e-15 of the trace).
+    and whether each converged (off-diagonal below 1e-15 of the trace): :func:`_jacobi_rows`' results by matrix."""
+    entries, vectors, converged = _jacobi_rows(C, sweeps)
+    m = entries.shape[1]
+    return np.ascontiguousarray(entries[[0, 3, 5]].T), np.ascontiguousarray(vectors.T).reshape(m, 3, 3), converged
+
+
+def _jacobi_rows(C, sweeps=_JACOBI_SWEEPS):
+    """The eigensystems of symmetric 3x3 matrices by cyclic Jacobi rotations, as rows over the matrices: the upper
+    triangle's entries (6, m) in :data:`_UPPER`'s order once diagonalised (the eigenvalues at rows 0, 3 and 5), the
+    eigenvectors (9, m) (row 3 i + j: entry (i, j), the eigenvectors as columns), and whether each converged
+    (off-diagonal below 1e-15 of the trace).
 
     The entries are kept as separate contiguous arrays (one per matrix entry), so each rotation is a few
     dozen vector operations over all m matrices: about eight times faster than ``np.linalg.eigh`` or
@@ -143,8 +154,7 @@ def _jacobi_eigh(C, sweeps=_JACOBI_SWEEPS):
         entries = np.array([a[key] for key in _UPPER], dtype=np.float64)
         vectors = np.empty((9, m))
         converged = kernels.jacobi_eigh(entries, sweeps, _JACOBI_MAX_SWEEPS, _ROTATION_TABLE, vectors)
-        values = np.ascontiguousarray(entries[[0, 3, 5]].T)
-        return values, np.ascontiguousarray(vectors.T).reshape(m, 3, 3), converged
+        return entries, vectors, converged
     V = [[np.full(m, float(i == j)) for j in range(3)] for i in range(3)]  # V[row][column]
     scale = (np.abs(a[0, 0]) + np.abs(a[1, 1]) + np.abs(a[2, 2])) * 1e-15
     for sweep in range(_JACOBI_MAX_SWEEPS):
@@ -168,28 +178,29 @@ def _jacobi_eigh(C, sweeps=_JACOBI_SWEEPS):
             for row in V:
                 row[p], row[q] = c * row[p] - s * row[q], s * row[p] + c * row[q]
     converged = np.sqrt(a[0, 1] ** 2 + a[0, 2] ** 2 + a[1, 2] ** 2) <= scale
-    values = np.stack([a[0, 0], a[1, 1], a[2, 2]], axis=1)
-    return values, np.stack([np.stack(row, axis=1) for row in V], axis=1), converged
+    return np.array([a[key] for key in _UPPER]), np.array([V[i][j] for i in range(3) for j in range(3)]), converged
 
 
 def rotation_preserving_svd(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """F = U diag(s) V^T with det U = det V = 1 for (m, 3, 3) F; an inverted F has s_3 < 0.
 
     Well-conditioned F with det F > 0 (nearly every tet of a simulation) take the fast path: V and s^2
-    from Jacobi rotations on F^T F (:func:`_jacobi_eigh`), U = F V / s. The rest (inverted, nearly
-    flat, condition above :data:`_JACOBI_CONDITION`, or unconverged) take LAPACK's SVD with the
-    smallest singular value's sign flipped where a reflection must be undone. Singular values are
-    in no particular order on the fast path and descending on LAPACK's.
+    from Jacobi rotations on F^T F (:func:`_jacobi_rows`), U = F V / s (:func:`_polar_fast`, or the
+    compiled kernel with the same operations). The rest (inverted, nearly flat, condition above
+    :data:`_JACOBI_CONDITION`, or unconverged) take LAPACK's SVD with the smallest singular value's sign
+    flipped where a reflection must be undone. Singular values are in no particular order on the fast path
+    and descending on LAPACK's.
     """
-    F = np.asarray(F, dtype=np.float64)
-    values, V, converged = _jacobi_eigh(_gram_entries(F))
-    det_F = _det3(F)
-    lowest, highest = values.min(axis=1), values.max(axis=1)
-    fast = converged & (det_F > 0.0) & (lowest * _JACOBI_CONDITION**2 > highest)
-    s = np.sqrt(np.maximum(values, 0.0))
-    # V is a product of plane rotations, so det V = 1, and det U = det F / prod(s) > 0 on the fast path.
-    U = np.matmul(F, V) / np.where(fast[:, None], s, 1.0)[:, None, :]
-    Vt = np.swapaxes(V, 1, 2)
+    F = np.ascontiguousarray(F, dtype=np.float64)
+    m = len(F)
+    rows = np.ascontiguousarray(F.transpose(1, 2, 0))  # rows[k, i] = F_ki over all matrices
+    entries, vectors, converged = _jacobi_rows(_gram_entries(rows))
+    U, s, Vt = np.empty((m, 3, 3)), np.empty((m, 3)), np.empty((m, 3, 3))
+    kernels = compiled()
+    if kernels is not None:
+        fast = kernels.polar_fast(F, entries, vectors, converged, _JACOBI_CONDITION**2, U, s, Vt)
+    else:
+        fast = _polar_fast(rows, entries, vectors, converged, U, s, Vt)
     slow = np.flatnonzero(~fast)
     if len(slow):
         U_s, s_s, Vt_s = np.linalg.svd(F[slow])
@@ -203,10 +214,34 @@ def rotation_preserving_svd(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     return U, s, Vt
 
 
-def _gram_entries(F):
-    """The upper triangle of F^T F as {(i, j): (m,) array}, from F's entries laid out as (3, 3, m) rows: 1.2 ms for
-    the stacked product on 15,360 matrices (its transposed operand is strided), 0.3 this way."""
-    rows = np.ascontiguousarray(F.transpose(1, 2, 0))  # rows[k, i] = F_ki over all matrices
+def _polar_fast(rows, entries, vectors, converged, U, s, Vt):
+    """(m,) bool -- which F take :func:`rotation_preserving_svd`'s fast path; writes its U, s and V^T for every F
+    (those of the others are LAPACK's afterwards) from F's entries as rows ((3, 3, m), ``rows[k, i]`` = F_ki) and the
+    Jacobi rotations' rows (:func:`_jacobi_rows`).
+
+    Fast: converged, det F > 0 and the eigenvalues of F^T F within :data:`_JACOBI_CONDITION` squared of each other.
+    s = sqrt(max(eigenvalue, 0)), V the eigenvectors (a product of plane rotations, so det V = 1, and det U = det F /
+    prod(s) > 0), U = F V / s, each entry's sum in a fixed order: the kernel does the same operations
+    (:func:`volspring._compiled.polar_fast`).
+    """
+    values = entries[[0, 3, 5]]  # (3, m)
+    fast = converged & (_det3(rows.transpose(2, 0, 1)) > 0.0) & \
+        (values.min(axis=0) * _JACOBI_CONDITION**2 > values.max(axis=0))
+    roots = np.sqrt(np.maximum(values, 0.0))
+    s[...] = roots.T
+    divisor = np.where(fast, roots, 1.0)
+    V = vectors.reshape(3, 3, -1)  # V[i, j]: entry (i, j) of every matrix
+    for k in range(3):
+        for c in range(3):
+            U[:, k, c] = ((rows[k, 0] * V[0, c] + rows[k, 1] * V[1, c]) + rows[k, 2] * V[2, c]) / divisor[c]
+    Vt[...] = V.transpose(2, 1, 0)
+    return fast
+
+
+def _gram_entries(rows):
+    """The upper triangle of F^T F as {(i, j): (m,) array}, from F's entries laid out as (3, 3, m) rows (``rows[k, i]``
+    = F_ki over all matrices): 1.2 ms for the stacked product on 15,360 matrices (its transposed operand is strided),
+    0.3 this way."""
     return {(i, j): rows[0, i] * rows[0, j] + rows[1, i] * rows[1, j] + rows[2, i] * rows[2, j]
             for i in range(3) for j in range(i, 3)}
 
@@ -252,10 +287,19 @@ def corotated(F: np.ndarray, *, project: bool = True) -> tuple[np.ndarray, ...]:
     psi, P, coefficients
         as for :func:`corotational`
     """
+    F = np.ascontiguousarray(F, dtype=np.float64)
     U, s, Vt = rotation_preserving_svd(F)
-    psi = ((s - 1.0) ** 2).sum(axis=1)
-    P = 2.0 * (F - U @ Vt)
-    coefficients = np.empty(F.shape[:1] + (3,))
+    m = len(F)
+    psi, P, coefficients = np.empty(m), np.empty((m, 3, 3)), np.empty((m, 3))
+    kernels = compiled()
+    if kernels is not None:  # the same operations per matrix, compiled
+        kernels.corotated_parts(F, U, s, Vt, project, psi, P, coefficients)
+        return U, Vt, psi, P, coefficients
+    d = s - 1.0
+    psi[:] = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]
+    # R = U V^T, entry by entry over all matrices: (m, 3) columns of U times rows of V^T (broadcast over the rows')
+    P[...] = 2.0 * (F - ((U[:, :, 0, None] * Vt[:, None, 0, :] + U[:, :, 1, None] * Vt[:, None, 1, :])
+                         + U[:, :, 2, None] * Vt[:, None, 2, :]))
     for r, (i, j) in enumerate(_TWIST_PAIRS):
         total = s[:, i] + s[:, j]
         if project:
@@ -279,16 +323,23 @@ def twist_directions(U: np.ndarray, Vt: np.ndarray) -> np.ndarray:
 
 def twist_rows(U: np.ndarray, Vt: np.ndarray, vectors: np.ndarray) -> np.ndarray:
     """(m, 3, k, 3) -- q_r a of each twist q_r of :func:`twist_directions` (U, Vt) and each of the k vectors a of
-    ``vectors`` (m, k, 3), without forming q_r: q_r a = (u_i (v_j . a) - u_j (v_i . a)) / sqrt 2.
-
-    All three twists at once as one stacked product (m, r, k, 2) @ (m, r, 2, 3) of the pairs ((v_j . a) / sqrt 2,
-    -(v_i . a) / sqrt 2) and (u_i, u_j): 2.8 ms on 15,360 tets' four gradients where a broadcast per twist took 6.1
-    (strided views of U and of the projections; the same rows to 9e-16; ``benchmarks/bench_ladder.py``'s beam)."""
-    along = np.matmul(vectors, np.swapaxes(Vt, 1, 2)) * (1.0 / np.sqrt(2.0))  # (m, k, 3): v_c . a / sqrt 2
-    pairs = np.asarray(_TWIST_PAIRS)
-    left = along[:, :, pairs[:, ::-1]] * np.array([1.0, -1.0])  # (m, k, r, 2): (v_j . a, -v_i . a) / sqrt 2
-    right = U[:, :, pairs]  # (m, c, r, 2): components c of (u_i, u_j)
-    return np.matmul(left.transpose(0, 2, 1, 3), right.transpose(0, 2, 3, 1))  # (m, r, k, c)
+    ``vectors`` (m, k, 3), without forming q_r: q_r a = (u_i (v_j . a) - u_j (v_i . a)) / sqrt 2, each v . a summed
+    in a fixed order, so that the compiled kernel (:func:`volspring._compiled.twist_rows`) makes the same bits."""
+    U, Vt = np.ascontiguousarray(U, dtype=np.float64), np.ascontiguousarray(Vt, dtype=np.float64)
+    vectors = np.ascontiguousarray(vectors, dtype=np.float64)
+    m, k = vectors.shape[:2]
+    out = np.empty((m, 3, k, 3))
+    kernels = compiled()
+    if kernels is not None:
+        kernels.twist_rows(U, Vt, vectors, _HALF_ROOT, out)
+        return out
+    x, y, z = vectors[:, :, 0], vectors[:, :, 1], vectors[:, :, 2]
+    along = [((x * Vt[:, c, 0, None] + y * Vt[:, c, 1, None]) + z * Vt[:, c, 2, None]) * _HALF_ROOT
+             for c in range(3)]  # (m, k): v_c . a / sqrt 2
+    for r, (i, j) in enumerate(_TWIST_PAIRS):
+        for c in range(3):
+            np.subtract(along[j] * U[:, c, i, None], along[i] * U[:, c, j, None], out=out[:, r, :, c])
+    return out
 
 
 def sparse_layout(indices: np.ndarray, indptr: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
