@@ -257,6 +257,26 @@ def test_the_per_tet_shear_product_is_numpys_bit_for_bit():
         tets.linearize_operator(x).scaled_times(np.zeros((10, 3)))
 
 
+@needs_numba
+def test_the_smoothed_shear_product_is_numpys_bit_for_bit():
+    from volspring.elements import NodalStrain
+
+    model = beam_scene((8, 3, 3), model="smoothed").model
+    shear = next(element_set for element_set in model.elements
+                 if isinstance(element_set, NodalStrain) and element_set.shear.any())
+    x, u = disturbed(model, 0.02, seed=7)
+    columns = np.random.default_rng(8).standard_normal(u.shape + (5,))
+
+    def product():
+        lin = shear.linearize_operator(x, stiffness_scale=1e-4)
+        return lin.scaled_times(u), lin.dfdx_times(u), lin.scaled_times_many(columns)
+
+    numpy_result, kernel_result = under_both(product)
+    for reference, result in zip(numpy_result, kernel_result):
+        assert_same_bits(reference, result)
+    assert np.abs(numpy_result[0]).max() > 0.0
+
+
 def random_bsr(rng, block_rows, block_columns, blocksize, density):
     """A BSR matrix of random blocks, some block rows empty, its block columns in no particular order."""
     import scipy.sparse as sp

@@ -14,7 +14,7 @@ import numba
 import numpy as np
 
 __all__ = ["block_product", "block_product_rows", "block_times", "corotated_parts", "corotated_times", "finest_down",
-           "finest_up", "jacobi_eigh", "polar_fast", "spring_block_sum", "spring_linearization",
+           "finest_up", "jacobi_eigh", "nodal_shear_times", "polar_fast", "spring_block_sum", "spring_linearization",
            "spring_stiffness_times", "twist_rows"]
 
 def _jit(function):
@@ -402,6 +402,55 @@ def twist_rows(U, Vt, vectors, half_root, out):  # pragma: no cover (compiled)
                 out[t, 0, a, c] = along1 * U[t, c, 0] - along0 * U[t, c, 1]
                 out[t, 1, a, c] = along2 * U[t, c, 0] - along0 * U[t, c, 2]
                 out[t, 2, a, c] = along2 * U[t, c, 1] - along1 * U[t, c, 2]
+
+
+@_jit
+def nodal_shear_times(ip0, ix0, ip1, ix1, ip2, ix2, a0, a1, a2, u, twists, coefficients, weights, sp0, sx0, sp1, sx1,
+                      sp2, sx2, s0, s1, s2, out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """The smoothed shear's product of :meth:`volspring.elements.NodalStrain._stiffness_times_many` for one (n, 3)
+    column ``u``, into ``out`` (n, 3): each domain's dFbar by the three averaging matrices (CSR ``ip``, ``ix``, ``a``;
+    dFbar[i, c] from matrix c), the corotational Hessian on it (``_hessian_times``'s order) times 2 and the domain's
+    weight, spread back by the three spreading matrices (``sp``, ``sx``, ``s``) and summed over them as ``sum()``
+    sums numpy's three products. Every sum from zero in scipy's entry order: the same bits."""
+    d = ip0.shape[0] - 1
+    stress = np.empty((d, 3, 3))
+    dF = np.empty((3, 3))
+    for domain in range(d):
+        for c in range(3):
+            indptr, indices, data = (ip0, ix0, a0) if c == 0 else (ip1, ix1, a1) if c == 1 else (ip2, ix2, a2)
+            f0 = f1 = f2 = 0.0
+            for entry in range(indptr[domain], indptr[domain + 1]):
+                node, value = indices[entry], data[entry]
+                f0 += value * u[node, 0]
+                f1 += value * u[node, 1]
+                f2 += value * u[node, 2]
+            dF[0, c], dF[1, c], dF[2, c] = f0, f1, f2
+        p0 = twists[domain, 0, 0, 0] * dF[0, 0]
+        p1 = twists[domain, 1, 0, 0] * dF[0, 0]
+        p2 = twists[domain, 2, 0, 0] * dF[0, 0]
+        for entry in range(1, 9):
+            i, j = entry // 3, entry % 3
+            p0 = p0 + twists[domain, 0, i, j] * dF[i, j]
+            p1 = p1 + twists[domain, 1, i, j] * dF[i, j]
+            p2 = p2 + twists[domain, 2, i, j] * dF[i, j]
+        p0, p1, p2 = p0 * coefficients[domain, 0], p1 * coefficients[domain, 1], p2 * coefficients[domain, 2]
+        weight = weights[domain]
+        for i in range(3):
+            for j in range(3):
+                correction = (p0 * twists[domain, 0, i, j] + p1 * twists[domain, 1, i, j]) + p2 * twists[domain, 2, i, j]
+                stress[domain, i, j] = weight * (2.0 * (dF[i, j] - correction))
+    for node in range(out.shape[0]):
+        t0 = t1 = t2 = 0.0
+        for c in range(3):
+            indptr, indices, data = (sp0, sx0, s0) if c == 0 else (sp1, sx1, s1) if c == 1 else (sp2, sx2, s2)
+            f0 = f1 = f2 = 0.0
+            for entry in range(indptr[node], indptr[node + 1]):
+                domain, value = indices[entry], data[entry]
+                f0 += value * stress[domain, 0, c]
+                f1 += value * stress[domain, 1, c]
+                f2 += value * stress[domain, 2, c]
+            t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
+        out[node, 0], out[node, 1], out[node, 2] = t0, t1, t2
 
 
 @_jit

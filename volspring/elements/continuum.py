@@ -87,10 +87,26 @@ def _twist_vectors(twists, coefficients, vectors):
     return plain, coefficients[:, :, None] * plain
 
 
-def _hessian_times(twists, coefficients, dF):
-    """(m, 3, 3) -- the corotational Hessian (without its factor 2) applied to dF: dF - sum_r c_r <q_r, dF> q_r."""
-    projections = np.einsum("mrij,mij->mr", twists, dF) * coefficients
-    return dF - np.einsum("mr,mrij->mij", projections, twists)
+def _hessian_times(entries, coefficients, dF):
+    """(m, 3, 3) -- the corotational Hessian (without its factor 2) applied to dF: dF - sum_r c_r <q_r, dF> q_r, each
+    sum in a fixed order (<q, dF> over the entries row by row, then over r), so that the compiled product
+    (:func:`volspring._compiled.nodal_shear_times`) makes the same bits. ``entries``: the twists q_r as
+    :func:`_twist_entries` lays them out (r, i, j, m); the operations run on contiguous rows over the m matrices."""
+    F = np.ascontiguousarray(np.moveaxis(dF, 0, -1))  # (i, j, m)
+    inner = entries[:, 0, 0] * F[0, 0]  # (r, m)
+    for i, j in _ENTRIES[1:]:
+        inner = inner + entries[:, i, j] * F[i, j]
+    projections = inner * coefficients.T
+    correction = (projections[0] * entries[0] + projections[1] * entries[1]) + projections[2] * entries[2]
+    return np.moveaxis(F - correction, -1, 0)
+
+
+def _twist_entries(twists):
+    """(3, 3, 3, m) -- the (m, 3, 3, 3) twists q_r[i, j] of m matrices as rows over the matrices (r, i, j, m)."""
+    return np.ascontiguousarray(np.moveaxis(twists, 0, -1))
+
+
+_ENTRIES = tuple((i, j) for i in range(3) for j in range(3))  # a 3x3 matrix's entries, row by row
 
 
 class _TetContinuum(ElementSet):
@@ -205,7 +221,8 @@ class CorotatedTets(_TetContinuum):
         return forces
 
     def _damping_forces(self, twists, coefficients, v):
-        dP = 2.0 * _hessian_times(twists, coefficients, self.kinematics.deformation(np.asarray(v, dtype=np.float64)))
+        dP = 2.0 * _hessian_times(_twist_entries(twists), coefficients,
+                                  self.kinematics.deformation(np.asarray(v, dtype=np.float64)))
         return self.stiffness_damping * self._forces_from(dP)
 
     def _blocks(self, twists, coefficients):
@@ -543,7 +560,19 @@ class NodalStrain(_TetContinuum):
             result += (Wt @ ((self.bulk / domains.volumes)[:, None] * rate)).reshape(n, 3, k)
         if "P" in state:
             weights = (self.shear * domains.volumes)[:, None, None]
-            dP = [weights * (2.0 * _hessian_times(state["twists"], state["coefficients"], dF))
+            kernels = compiled()
+            if kernels is not None:  # the same sums compiled, column by column (each column's sums are as alone)
+                averaging, spreading = domains.averaging_layout, domains.spreading_layout
+                twists, coefficients, weights = state["twists"], state["coefficients"], weights.reshape(-1)
+                for j in range(k):
+                    column = np.ascontiguousarray(U[:, :, j])
+                    spread = np.empty((n, 3))
+                    kernels.nodal_shear_times(*averaging, column, twists, coefficients, weights, *spreading, spread)
+                    result[:, :, j] += spread
+                return result
+            if "twist_entries" not in state:  # made once per state: CG applies the product many times at one
+                state["twist_entries"] = _twist_entries(state["twists"])
+            dP = [weights * (2.0 * _hessian_times(state["twist_entries"], state["coefficients"], dF))
                   for dF in domains.averaged_many(U)]
             result += domains.spread_many(np.stack(dP, axis=-1))
         return result

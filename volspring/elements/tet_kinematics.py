@@ -27,7 +27,7 @@ import numpy as np
 from typing import TYPE_CHECKING
 
 from meshing.mesh import TET_FACES, boundary_face_mask, tet_edges
-from volspring.kernels import compiled
+from volspring.kernels import compiled, unsigned
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike
@@ -448,6 +448,18 @@ class SmoothingDomains:
     def _spreading(self):
         return tuple(G.T.tocsr() for G in self._averaging)
 
+    @cached_property
+    def averaging_layout(self) -> tuple:
+        """The three averaging matrices (d, n) of :meth:`averaged` as the arrays of a compiled kernel: indptr and
+        indices of each (unsigned) and their data, in that order."""
+        return _kernel_arrays(self._averaging)
+
+    @cached_property
+    def spreading_layout(self) -> tuple:
+        """The three spreading matrices (n, d) of :meth:`spread` (the averaging ones transposed) as
+        :attr:`averaging_layout`."""
+        return _kernel_arrays(self._spreading)
+
     def averaged(self, x: np.ndarray) -> np.ndarray:
         """(d, 3, 3) float -- Fbar_d at positions x."""
         return self.averaged_many(np.reshape(x, (-1, 3, 1)))[0]
@@ -486,6 +498,12 @@ class SmoothingDomains:
         """(first, second) : (p,) int -- every ordered pair of ring entries of one domain, grouped by domain."""
         counts = np.bincount(self.ring_domain, minlength=self.domain_count)
         return domain_pairs(counts)
+
+
+def _kernel_arrays(matrices) -> tuple:
+    """(indptr, indices) of each CSR matrix (viewed unsigned, for a compiled kernel), then the data of each."""
+    layout = tuple(array for matrix in matrices for array in (unsigned(matrix.indptr), unsigned(matrix.indices)))
+    return layout + tuple(matrix.data for matrix in matrices)
 
 
 def pair_nodes(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
