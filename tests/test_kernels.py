@@ -277,6 +277,23 @@ def test_the_smoothed_shear_product_is_numpys_bit_for_bit():
     assert np.abs(numpy_result[0]).max() > 0.0
 
 
+@needs_numba
+def test_the_volume_terms_product_is_numpys_bit_for_bit():
+    from volspring.elements import NodalStrain
+
+    model = beam_scene((8, 3, 3), model="springs+volume").model
+    volume = next(element_set for element_set in model.elements if isinstance(element_set, NodalStrain))
+    x, u = disturbed(model, 0.02, seed=10)
+
+    def product():
+        lin = volume.linearize_operator(x, stiffness_scale=1e-4)
+        return lin.forces, lin.scaled_times(u), volume.stiffness_blocks(x)
+
+    numpy_result, kernel_result = under_both(product)
+    for reference, result in zip(numpy_result, kernel_result):
+        assert_same_bits(reference, result)
+
+
 def random_bsr(rng, block_rows, block_columns, blocksize, density):
     """A BSR matrix of random blocks, some block rows empty, its block columns in no particular order."""
     import scipy.sparse as sp

@@ -15,7 +15,7 @@ import numpy as np
 
 __all__ = ["block_product", "block_product_rows", "block_times", "corotated_parts", "corotated_times", "finest_down",
            "finest_up", "jacobi_eigh", "nodal_shear_times", "polar_fast", "spring_block_sum", "spring_linearization",
-           "spring_stiffness_times", "twist_rows"]
+           "spring_stiffness_times", "twist_rows", "volume_gradients"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -451,6 +451,17 @@ def nodal_shear_times(ip0, ix0, ip1, ix1, ip2, ix2, a0, a1, a2, u, twists, coeff
                 f2 += value * stress[domain, 2, c]
             t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
         out[node, 0], out[node, 1], out[node, 2] = t0, t1, t2
+
+
+@_jit
+def volume_gradients(gradients, cof, volumes, out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """:meth:`volspring.elements.NodalStrain._volume_gradients` per tet, the same operations: ``out`` (T, 4, 3) =
+    V_t cof(F_t) g_ta for ``gradients`` (T, 4, 3), ``cof`` (T, 3, 3) and ``volumes`` (T,)."""
+    for t in range(gradients.shape[0]):
+        for a in range(4):
+            g0, g1, g2 = gradients[t, a, 0], gradients[t, a, 1], gradients[t, a, 2]
+            for i in range(3):
+                out[t, a, i] = ((g0 * cof[t, i, 0] + g1 * cof[t, i, 1]) + g2 * cof[t, i, 2]) * volumes[t]
 
 
 @_jit

