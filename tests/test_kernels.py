@@ -50,6 +50,22 @@ def under_both(function):
     return reference, function()
 
 
+def assert_each_the_same_under_both(function):
+    """Each array of the tuple ``function()`` returns is the same bits with numpy and with the kernels; numpy's
+    arrays back."""
+    numpy_result, kernel_result = under_both(function)
+    for reference, result in zip(numpy_result, kernel_result, strict=True):
+        assert_same_bits(reference, result)
+    return numpy_result
+
+
+def element_set(model_name, kind, wanted=lambda element_set: True):
+    """The README-like beam (8 x 3 x 3 cells) on rung ``model_name`` and its first element set of type ``kind`` that
+    ``wanted`` accepts."""
+    model = beam_scene((8, 3, 3), model=model_name).model
+    return model, next(each for each in model.elements if isinstance(each, kind) and wanted(each))
+
+
 # ---------------------------------------------------------------------------- the choice
 def test_a_choice_outside_the_three_is_refused_by_name():
     with pytest.raises(ValueError, match=r"kernels = 'cuda'; expected one of 'auto', 'numba', 'numpy'"):
@@ -232,66 +248,42 @@ def test_the_corotation_is_numpys_bit_for_bit_inverted_tets_included(project):
         U, Vt, psi, P, coefficients = corotated(F, project=project)
         return U, Vt, psi, P, coefficients, twist_rows(U, Vt, vectors)
 
-    numpy_result, kernel_result = under_both(corotation)
-    for reference, result in zip(numpy_result, kernel_result):
-        assert_same_bits(reference, result)
+    assert_each_the_same_under_both(corotation)
+
+
+CONTINUUM_SETS = {"per-tet shear": ("smoothed", "CorotatedTets", lambda each: True),
+                  "nodal shear": ("smoothed", "NodalStrain", lambda each: each.shear.any()),
+                  "nodal volume": ("springs+volume", "NodalStrain", lambda each: each.bulk.any())}
 
 
 @needs_numba
-def test_the_per_tet_shear_product_is_numpys_bit_for_bit():
+@pytest.mark.parametrize("which", list(CONTINUUM_SETS))
+def test_a_continuum_sets_forces_products_and_blocks_are_numpys_bit_for_bit(which):
+    import volspring.elements
+
+    rung, kind, wanted = CONTINUUM_SETS[which]
+    model, continuum = element_set(rung, getattr(volspring.elements, kind), wanted)
+    x, u = disturbed(model, 0.02, seed=6)
+    columns = np.random.default_rng(7).standard_normal(u.shape + (5,))
+
+    def linearized():
+        lin = continuum.linearize_operator(x, stiffness_scale=1e-4)
+        return (lin.forces, lin.scaled_times(u), lin.dfdx_times(u), lin.scaled_times_many(columns),
+                continuum.stiffness_blocks(x))
+
+    forces, product, *_ = assert_each_the_same_under_both(linearized)
+    assert np.abs(forces).max() > 0.0 and np.abs(product).max() > 0.0
+
+
+@needs_numba
+def test_a_product_with_the_wrong_rows_is_refused_before_the_kernel_reads_them():
     from volspring.elements import CorotatedTets
 
-    model = beam_scene((8, 3, 3), model="smoothed").model
-    tets = next(element_set for element_set in model.elements if isinstance(element_set, CorotatedTets))
-    x, u = disturbed(model, 0.02, seed=6)
-
-    def product():
-        lin = tets.linearize_operator(x, stiffness_scale=1e-4)
-        return lin.scaled_times(u), lin.dfdx_times(u)
-
-    numpy_result, kernel_result = under_both(product)
-    for reference, result in zip(numpy_result, kernel_result):
-        assert_same_bits(reference, result)
+    model, tets = element_set("smoothed", CorotatedTets)
+    x, _ = disturbed(model, 0.02, seed=6)
     kernels.select("numba")
     with pytest.raises(ValueError, match=r"u has 10 rows; expected 144"):
         tets.linearize_operator(x).scaled_times(np.zeros((10, 3)))
-
-
-@needs_numba
-def test_the_smoothed_shear_product_is_numpys_bit_for_bit():
-    from volspring.elements import NodalStrain
-
-    model = beam_scene((8, 3, 3), model="smoothed").model
-    shear = next(element_set for element_set in model.elements
-                 if isinstance(element_set, NodalStrain) and element_set.shear.any())
-    x, u = disturbed(model, 0.02, seed=7)
-    columns = np.random.default_rng(8).standard_normal(u.shape + (5,))
-
-    def product():
-        lin = shear.linearize_operator(x, stiffness_scale=1e-4)
-        return lin.scaled_times(u), lin.dfdx_times(u), lin.scaled_times_many(columns)
-
-    numpy_result, kernel_result = under_both(product)
-    for reference, result in zip(numpy_result, kernel_result):
-        assert_same_bits(reference, result)
-    assert np.abs(numpy_result[0]).max() > 0.0
-
-
-@needs_numba
-def test_the_volume_terms_product_is_numpys_bit_for_bit():
-    from volspring.elements import NodalStrain
-
-    model = beam_scene((8, 3, 3), model="springs+volume").model
-    volume = next(element_set for element_set in model.elements if isinstance(element_set, NodalStrain))
-    x, u = disturbed(model, 0.02, seed=10)
-
-    def product():
-        lin = volume.linearize_operator(x, stiffness_scale=1e-4)
-        return lin.forces, lin.scaled_times(u), volume.stiffness_blocks(x)
-
-    numpy_result, kernel_result = under_both(product)
-    for reference, result in zip(numpy_result, kernel_result):
-        assert_same_bits(reference, result)
 
 
 def random_bsr(rng, block_rows, block_columns, blocksize, density):

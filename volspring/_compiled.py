@@ -126,13 +126,20 @@ def _csr_times(indptr, indices, data, vectors, out):  # pragma: no cover (compil
     several vectors (each row from zero, entry by entry): the springs' incidence scattering their forces, a
     scalar stiffness matrix applied to each component."""
     for row in range(indptr.shape[0] - 1):
-        f0 = f1 = f2 = 0.0
-        for entry in range(indptr[row], indptr[row + 1]):
-            column, value = indices[entry], data[entry]
-            f0 += value * vectors[column, 0]
-            f1 += value * vectors[column, 1]
-            f2 += value * vectors[column, 2]
-        out[row, 0], out[row, 1], out[row, 2] = f0, f1, f2
+        out[row, 0], out[row, 1], out[row, 2] = _row_times(indptr, indices, data, vectors, row)
+
+
+@_jit
+def _row_times(indptr, indices, data, vectors, row):  # pragma: no cover (compiled)
+    """Row ``row`` of a CSR matrix A times the three columns of ``vectors`` (m, 3), as scipy sums it (from zero,
+    entry by entry)."""
+    f0 = f1 = f2 = 0.0
+    for entry in range(indptr[row], indptr[row + 1]):
+        column, value = indices[entry], data[entry]
+        f0 += value * vectors[column, 0]
+        f1 += value * vectors[column, 1]
+        f2 += value * vectors[column, 2]
+    return f0, f1, f2
 
 
 @_jit
@@ -416,15 +423,9 @@ def nodal_shear_times(ip0, ix0, ip1, ix1, ip2, ix2, a0, a1, a2, u, twists, coeff
     stress = np.empty((d, 3, 3))
     dF = np.empty((3, 3))
     for domain in range(d):
-        for c in range(3):
-            indptr, indices, data = (ip0, ix0, a0) if c == 0 else (ip1, ix1, a1) if c == 1 else (ip2, ix2, a2)
-            f0 = f1 = f2 = 0.0
-            for entry in range(indptr[domain], indptr[domain + 1]):
-                node, value = indices[entry], data[entry]
-                f0 += value * u[node, 0]
-                f1 += value * u[node, 1]
-                f2 += value * u[node, 2]
-            dF[0, c], dF[1, c], dF[2, c] = f0, f1, f2
+        dF[0, 0], dF[1, 0], dF[2, 0] = _row_times(ip0, ix0, a0, u, domain)
+        dF[0, 1], dF[1, 1], dF[2, 1] = _row_times(ip1, ix1, a1, u, domain)
+        dF[0, 2], dF[1, 2], dF[2, 2] = _row_times(ip2, ix2, a2, u, domain)
         p0 = twists[domain, 0, 0, 0] * dF[0, 0]
         p1 = twists[domain, 1, 0, 0] * dF[0, 0]
         p2 = twists[domain, 2, 0, 0] * dF[0, 0]
@@ -439,18 +440,14 @@ def nodal_shear_times(ip0, ix0, ip1, ix1, ip2, ix2, a0, a1, a2, u, twists, coeff
             for j in range(3):
                 correction = (p0 * twists[domain, 0, i, j] + p1 * twists[domain, 1, i, j]) + p2 * twists[domain, 2, i, j]
                 stress[domain, i, j] = weight * (2.0 * (dF[i, j] - correction))
+    by_column = (stress[:, :, 0], stress[:, :, 1], stress[:, :, 2])  # stress[:, i, c] of each gradient component c
     for node in range(out.shape[0]):
-        t0 = t1 = t2 = 0.0
-        for c in range(3):
-            indptr, indices, data = (sp0, sx0, s0) if c == 0 else (sp1, sx1, s1) if c == 1 else (sp2, sx2, s2)
-            f0 = f1 = f2 = 0.0
-            for entry in range(indptr[node], indptr[node + 1]):
-                domain, value = indices[entry], data[entry]
-                f0 += value * stress[domain, 0, c]
-                f1 += value * stress[domain, 1, c]
-                f2 += value * stress[domain, 2, c]
-            t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
-        out[node, 0], out[node, 1], out[node, 2] = t0, t1, t2
+        f0, f1, f2 = _row_times(sp0, sx0, s0, by_column[0], node)
+        t0, t1, t2 = 0.0 + f0, 0.0 + f1, 0.0 + f2  # Python's sum() of the three products starts from 0
+        f0, f1, f2 = _row_times(sp1, sx1, s1, by_column[1], node)
+        t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
+        f0, f1, f2 = _row_times(sp2, sx2, s2, by_column[2], node)
+        out[node, 0], out[node, 1], out[node, 2] = t0 + f0, t1 + f1, t2 + f2
 
 
 @_jit
