@@ -297,7 +297,7 @@ def corotated(F: np.ndarray, *, project: bool = True) -> tuple[np.ndarray, ...]:
         return U, Vt, psi, P, coefficients
     d = s - 1.0
     psi[:] = (d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]) + d[:, 2] * d[:, 2]
-    # R = U V^T, entry by entry over all matrices: (m, 3) columns of U times rows of V^T (broadcast over the rows')
+    # R = U V^T: U's columns times V^T's rows, broadcast over all matrices, summed in order (the kernel's order)
     P[...] = 2.0 * (F - ((U[:, :, 0, None] * Vt[:, None, 0, :] + U[:, :, 1, None] * Vt[:, None, 1, :])
                          + U[:, :, 2, None] * Vt[:, None, 2, :]))
     for r, (i, j) in enumerate(_TWIST_PAIRS):
