@@ -125,3 +125,39 @@ def test_the_direct_solver_and_exact_curvature_assemble_everything():
     assert not ImplicitEuler(solver="direct").matrix_free
     assert not ImplicitEuler(clamp_compression=False).matrix_free
     assert ImplicitEuler().matrix_free
+
+
+def test_a_step_whose_sets_are_all_products_multiplies_only_the_diagonal_blocks(bar, monkeypatch):
+    """Where no set is assembled (the smoothed rung) the step's matrix is the masses amid the stand-in's 1-ring of
+    zero blocks: CG and its guess multiply the diagonal blocks alone, and every bit of the run stays what it was
+    with the whole pattern (partly held nodes included, whose elimination edits the diagonal blocks)."""
+    from volspring.solvers import AMGConjugateGradient
+
+    mesh, model = bar
+    left = np.flatnonzero(mesh.points[:, 0] == 0.0)
+    right = np.flatnonzero(np.isclose(mesh.points[:, 0], 0.6))
+    start = mesh.points[right]
+    scene = Scene(model, forces=[Gravity()], pins=Pins(left[:1]),
+                  supports=[Sliding(left[1:], "x"), Prescribed(right, "x", motion=lambda t: start + [0.5 * t * t, 0, 0])])
+    solve, blocks = AMGConjugateGradient.solve, []
+
+    def recording(self, matrix, *args, **kwargs):
+        blocks.append(matrix.data.shape[0])
+        return solve(self, matrix, *args, **kwargs)
+
+    monkeypatch.setattr(AMGConjugateGradient, "solve", recording)
+
+    def run():
+        integrator, state = ImplicitEuler(), scene.initial_state()
+        for _ in range(5):
+            state = integrator.step(scene, state, 0.01)
+        return integrator.cache.pattern, state
+
+    pattern, compact = run()
+    expected = pattern.block_count if pattern.assembles else pattern.free_count
+    assert pattern.assembles == (model.rung != "smoothed")
+    assert blocks == [expected] * 5, (blocks, pattern.free_count, pattern.block_count)
+    monkeypatch.setattr(BlockPattern, "diagonal_part", lambda self, matrix: matrix)
+    _, whole = run()
+    for name in ("x", "v"):
+        assert np.array_equal(getattr(compact, name), getattr(whole, name)), name

@@ -229,6 +229,19 @@ class BlockPattern:
         """Whether some element set is applied as a product (see :meth:`operator`)."""
         return any(part.operator for part in self.parts)
 
+    @property
+    def assembles(self) -> bool:
+        """Whether some element set is assembled into :meth:`matrix`; when none is (every set applied as a product, the
+        smoothed rung), the matrix holds only the diagonal terms on the stand-in's pattern (:meth:`diagonal_part`)."""
+        return not all(part.operator for part in self.parts)
+
+    def diagonal_part(self, matrix: sp.bsr_matrix) -> sp.bsr_matrix:
+        """(3f, 3f) BSR -- the diagonal blocks of a matrix on this pattern alone, a copy (one block per row)."""
+        f = self.free_count
+        diagonal = np.ascontiguousarray(matrix.data[self.diagonal_blocks])
+        return sp.bsr_matrix((diagonal, np.arange(f, dtype=np.int32), np.arange(f + 1, dtype=np.int32)),
+                             shape=(self.size, self.size), copy=False)
+
     def _reorder(self):
         """Number the free nodes by reverse Cuthill-McKee on the graph of the element stencils.
 
