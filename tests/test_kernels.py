@@ -286,6 +286,24 @@ def test_a_product_with_the_wrong_rows_is_refused_before_the_kernel_reads_them()
         tets.linearize_operator(x).scaled_times(np.zeros((10, 3)))
 
 
+@needs_numba
+def test_gradients_and_stresses_of_the_wrong_shape_are_refused_before_the_kernels_read_them():
+    # gathered and spread read rows by the matrices' indices, unchecked: short arrays would be read past their end
+    from volspring.elements import NodalStrain
+
+    model, nodal = element_set("smoothed", NodalStrain, lambda each: each.shear.any())
+    kinematics, domains = nodal.kinematics, nodal.domains
+    kernels.select("numba")
+    with pytest.raises(ValueError, match=r"expected \(144, 3\) values, one row per node; got shape \(10, 3\)"):
+        domains.averaged(np.zeros((10, 3)))
+    with pytest.raises(ValueError, match=rf"expected \({domains.domain_count}, 3, 3\) matrices"):
+        domains.spread(np.zeros((10, 3, 3)))
+    with pytest.raises(ValueError, match=rf"expected \({len(kinematics.tets)}, 3, 3\) matrices"):
+        kinematics.spread(np.zeros((10, 3, 3)), model.node_count)
+    with pytest.raises(ValueError, match=r"positions have 10 rows"):
+        kinematics.deformation(np.zeros((10, 3)))
+
+
 def random_bsr(rng, block_rows, block_columns, blocksize, density):
     """A BSR matrix of random blocks, some block rows empty, its block columns in no particular order."""
     import scipy.sparse as sp

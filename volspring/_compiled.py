@@ -13,9 +13,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["block_product", "block_product_rows", "block_times", "corotated_parts", "corotated_times", "finest_down",
-           "finest_up", "jacobi_eigh", "nodal_shear_times", "polar_fast", "spring_block_sum", "spring_linearization",
-           "spring_stiffness_times", "twist_rows", "volume_gradients"]
+__all__ = ["block_product", "block_product_rows", "block_times", "cofactor", "corotated_parts", "corotated_times",
+           "finest_down", "finest_up", "gathered", "jacobi_eigh", "nodal_shear_times", "polar_fast", "spread",
+           "spring_block_sum", "spring_linearization", "spring_stiffness_times", "twist_directions", "twist_rows",
+           "volume_gradients"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -440,14 +441,59 @@ def nodal_shear_times(ip0, ix0, ip1, ix1, ip2, ix2, a0, a1, a2, u, twists, coeff
             for j in range(3):
                 correction = (p0 * twists[domain, 0, i, j] + p1 * twists[domain, 1, i, j]) + p2 * twists[domain, 2, i, j]
                 stress[domain, i, j] = weight * (2.0 * (dF[i, j] - correction))
-    by_column = (stress[:, :, 0], stress[:, :, 1], stress[:, :, 2])  # stress[:, i, c] of each gradient component c
+    spread(sp0, sx0, sp1, sx1, sp2, sx2, s0, s1, s2, stress, out)
+
+
+@_jit
+def gathered(ip0, ix0, ip1, ix1, ip2, ix2, a0, a1, a2, x, out):  # pragma: no cover (compiled; the fast tests compare)
+    """``out[:, :, c] = A_c @ x`` for three CSR matrices A_c (``ip``, ``ix``, ``a``) and (n, 3) ``x``, each row's sums
+    as scipy's product makes them (from zero, entry by entry): the deformation gradients of tets
+    (:meth:`volspring.elements.tet_kinematics.TetGradients.deformation`) or of smoothing domains
+    (:meth:`~volspring.elements.tet_kinematics.SmoothingDomains.averaged`), F[:, i, c] = (G_c x)[:, i]."""
+    for row in range(out.shape[0]):
+        out[row, 0, 0], out[row, 1, 0], out[row, 2, 0] = _row_times(ip0, ix0, a0, x, row)
+        out[row, 0, 1], out[row, 1, 1], out[row, 2, 1] = _row_times(ip1, ix1, a1, x, row)
+        out[row, 0, 2], out[row, 1, 2], out[row, 2, 2] = _row_times(ip2, ix2, a2, x, row)
+
+
+@_jit
+def spread(sp0, sx0, sp1, sx1, sp2, sx2, s0, s1, s2, stress, out):  # pragma: no cover (compiled; the fast tests compare)
+    """``out = sum(S_c @ stress[:, :, c] for c in range(3))`` for three CSR matrices S_c (``sp``, ``sx``, ``s``, the
+    transposes of :func:`gathered`'s) and (m, 3, 3) ``stress``, into ``out`` (rows of S_c, 3): each product's rows as
+    scipy sums them, and the three added as Python's ``sum()`` adds them (from 0)."""
     for node in range(out.shape[0]):
-        f0, f1, f2 = _row_times(sp0, sx0, s0, by_column[0], node)
-        t0, t1, t2 = 0.0 + f0, 0.0 + f1, 0.0 + f2  # Python's sum() of the three products starts from 0
-        f0, f1, f2 = _row_times(sp1, sx1, s1, by_column[1], node)
+        f0, f1, f2 = _row_times(sp0, sx0, s0, stress[:, :, 0], node)
+        t0, t1, t2 = 0.0 + f0, 0.0 + f1, 0.0 + f2
+        f0, f1, f2 = _row_times(sp1, sx1, s1, stress[:, :, 1], node)
         t0, t1, t2 = t0 + f0, t1 + f1, t2 + f2
-        f0, f1, f2 = _row_times(sp2, sx2, s2, by_column[2], node)
+        f0, f1, f2 = _row_times(sp2, sx2, s2, stress[:, :, 2], node)
         out[node, 0], out[node, 1], out[node, 2] = t0 + f0, t1 + f1, t2 + f2
+
+
+@_jit
+def cofactor(F, out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """cof(F) of each (m, 3, 3) ``F`` into ``out``: its columns the cross products of F's other two columns, each
+    component as ``np.cross`` computes it (a1 b2 - a2 b1, a2 b0 - a0 b2, a0 b1 - a1 b0)."""
+    for t in range(F.shape[0]):
+        for column in range(3):
+            a, b = (column + 1) % 3, (column + 2) % 3
+            a0, a1, a2 = F[t, 0, a], F[t, 1, a], F[t, 2, a]
+            b0, b1, b2 = F[t, 0, b], F[t, 1, b], F[t, 2, b]
+            out[t, 0, column] = a1 * b2 - a2 * b1
+            out[t, 1, column] = a2 * b0 - a0 * b2
+            out[t, 2, column] = a0 * b1 - a1 * b0
+
+
+@_jit
+def twist_directions(U, Vt, root, out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """:func:`volspring.elements.tet_kinematics.twist_directions` per matrix, the same operations: q_r[c, k] =
+    (U[c, i] V^T[j, k] - U[c, j] V^T[i, k]) / ``root`` (sqrt 2) for the pairs (i, j) = (0, 1), (0, 2), (1, 2)."""
+    for m in range(U.shape[0]):
+        for r in range(3):
+            i, j = (0, 0, 1)[r], (1, 2, 2)[r]
+            for c in range(3):
+                for k in range(3):
+                    out[m, r, c, k] = (U[m, c, i] * Vt[m, j, k] - U[m, c, j] * Vt[m, i, k]) / root
 
 
 @_jit

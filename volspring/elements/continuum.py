@@ -757,6 +757,12 @@ class NodalStrain(_TetContinuum):
 
 def _cofactor(F) -> np.ndarray:
     """(m, 3, 3) -- cof(F) = det(F) F^-T, defined for singular F too (columns are cross products)."""
+    kernels = compiled()
+    if kernels is not None:  # np.cross's operations, compiled (volspring.kernels)
+        F = np.ascontiguousarray(F, dtype=np.float64)
+        cof = np.empty(F.shape)
+        kernels.cofactor(F, cof)
+        return cof
     cof = np.empty_like(F)
     cof[:, :, 0] = np.cross(F[:, :, 1], F[:, :, 2])
     cof[:, :, 1] = np.cross(F[:, :, 2], F[:, :, 0])

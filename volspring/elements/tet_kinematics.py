@@ -94,6 +94,12 @@ class TetGradients:
                          for j in range(3))
         return matrices, tuple(matrix.T.tocsr() for matrix in matrices)
 
+    @cached_property
+    def _kernel_columns(self):
+        """:attr:`_columns` as the arrays of a compiled kernel: the three G_j's, then their transposes'."""
+        matrices, transposed = self._columns
+        return _kernel_arrays(matrices), _kernel_arrays(transposed)
+
     def deformation(self, x: np.ndarray) -> np.ndarray:
         """(T, 3, 3) float -- F_t at positions x."""
         x = np.asarray(x, dtype=np.float64)
@@ -101,6 +107,11 @@ class TetGradients:
         if len(x) < matrices[0].shape[1]:
             raise ValueError(f"positions have {len(x)} rows; the tets index node {matrices[0].shape[1] - 1}")
         x = x[:matrices[0].shape[1]]
+        kernels = compiled()
+        if kernels is not None:  # the same sums, compiled (volspring.kernels)
+            out = np.empty((len(self.tets), 3, 3))
+            kernels.gathered(*self._kernel_columns[0], np.ascontiguousarray(x), out)
+            return out
         return np.stack([G @ x for G in matrices], axis=2)
 
     def spread(self, stress: np.ndarray, node_count: int) -> np.ndarray:
@@ -108,6 +119,11 @@ class TetGradients:
         :meth:`deformation`: a tet set's forces are ``-spread(V_t P_t)``)."""
         _, transposed = self._columns
         out = np.zeros((node_count, 3))
+        kernels = compiled()
+        if kernels is not None and len(self.tets):  # the same sums, compiled (volspring.kernels)
+            stress = _stress_array(stress, len(self.tets))
+            kernels.spread(*self._kernel_columns[1], stress, out[:transposed[0].shape[0]])
+            return out
         if len(self.tets):
             out[:transposed[0].shape[0]] = sum(Gt @ np.ascontiguousarray(stress[:, :, j])
                                                for j, Gt in enumerate(transposed))
@@ -316,6 +332,11 @@ def twist_directions(U: np.ndarray, Vt: np.ndarray) -> np.ndarray:
     """(m, 3, 3, 3) -- the twists q_r = (u_i v_j^T - u_j v_i^T) / sqrt 2, (i, j) = (0, 1), (0, 2), (1, 2), of the
     rotations U, V^T (m, 3, 3): unit directions of F along which the rotation R turns."""
     result = np.empty(U.shape[:1] + (3, 3, 3))
+    kernels = compiled()
+    if kernels is not None:  # the same operations per matrix, compiled (volspring.kernels)
+        kernels.twist_directions(np.ascontiguousarray(U, dtype=np.float64), np.ascontiguousarray(Vt, dtype=np.float64),
+                                 np.sqrt(2.0), result)
+        return result
     for r, (i, j) in enumerate(_TWIST_PAIRS):
         result[:, r] = (U[:, :, i, None] * Vt[:, None, j, :] - U[:, :, j, None] * Vt[:, None, i, :]) / np.sqrt(2.0)
     return result
@@ -462,11 +483,21 @@ class SmoothingDomains:
 
     def averaged(self, x: np.ndarray) -> np.ndarray:
         """(d, 3, 3) float -- Fbar_d at positions x."""
+        kernels = compiled()
+        if kernels is not None:  # the same sums, compiled (volspring.kernels)
+            out = np.empty((self.domain_count, 3, 3))
+            kernels.gathered(*self.averaging_layout, _node_rows(x, self.node_count), out)
+            return out
         return self.averaged_many(np.reshape(x, (-1, 3, 1)))[0]
 
     def spread(self, stress: np.ndarray) -> np.ndarray:
         """(n, 3) float -- sum_d stress_d gbar_da per node a, for (d, 3, 3) ``stress`` (the transpose of
         :meth:`averaged`: forces are ``-spread(V_d P_d)``)."""
+        kernels = compiled()
+        if kernels is not None:  # the same sums, compiled (volspring.kernels)
+            out = np.empty((self.node_count, 3))
+            kernels.spread(*self.spreading_layout, _stress_array(stress, self.domain_count), out)
+            return out
         return self.spread_many(stress[..., None])[:, :, 0]
 
     def averaged_many(self, U: np.ndarray) -> list[np.ndarray]:
@@ -498,6 +529,23 @@ class SmoothingDomains:
         """(first, second) : (p,) int -- every ordered pair of ring entries of one domain, grouped by domain."""
         counts = np.bincount(self.ring_domain, minlength=self.domain_count)
         return domain_pairs(counts)
+
+
+def _node_rows(x, count) -> np.ndarray:
+    """(count, 3) float64, C-ordered -- positions or displacements per node for a compiled kernel, which does not check
+    the indices it reads with: a ValueError for any other shape."""
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    if x.shape != (count, 3):
+        raise ValueError(f"expected ({count}, 3) values, one row per node; got shape {x.shape}")
+    return x
+
+
+def _stress_array(stress, count) -> np.ndarray:
+    """(count, 3, 3) float64 -- one 3x3 matrix per tet or domain for a compiled kernel (a ValueError otherwise)."""
+    stress = np.asarray(stress, dtype=np.float64)
+    if stress.shape != (count, 3, 3):
+        raise ValueError(f"expected ({count}, 3, 3) matrices, one per tet or domain; got shape {stress.shape}")
+    return stress
 
 
 def _kernel_arrays(matrices) -> tuple:
