@@ -101,13 +101,19 @@ def test_the_layouts_filled_at_every_linearisation_are_taken_by_scipy_as_they_ar
         assert np.shares_memory(matrix.indices, indices) and np.shares_memory(matrix.indptr, indptr)
 
 
-def test_matrix_free_steps_equal_assembled_steps_with_sliding_and_prescribed_supports(bar):
-    mesh, model = bar
+def _held_in_part(mesh, model):
+    """The bar under gravity, one end sliding in its plane (one node pinned), the other end pulled along x: partly
+    held nodes, whose held components the step eliminates."""
     left = np.flatnonzero(mesh.points[:, 0] == 0.0)
     right = np.flatnonzero(np.isclose(mesh.points[:, 0], 0.6))
     start = mesh.points[right]
-    scene = Scene(model, forces=[Gravity()], pins=Pins(left[:1]),
-                  supports=[Sliding(left[1:], "x"), Prescribed(right, "x", motion=lambda t: start + [0.5 * t * t, 0, 0])])
+    return Scene(model, forces=[Gravity()], pins=Pins(left[:1]),
+                 supports=[Sliding(left[1:], "x"), Prescribed(right, "x", motion=lambda t: start + [0.5 * t * t, 0, 0])])
+
+
+def test_matrix_free_steps_equal_assembled_steps_with_sliding_and_prescribed_supports(bar):
+    mesh, model = bar
+    scene = _held_in_part(mesh, model)
     states = {}
     for matrix_free in (True, False):
         integrator = ImplicitEuler(rtol=1e-12, matrix_free=matrix_free)
@@ -134,11 +140,7 @@ def test_a_step_whose_sets_are_all_products_multiplies_only_the_diagonal_blocks(
     from volspring.solvers import AMGConjugateGradient
 
     mesh, model = bar
-    left = np.flatnonzero(mesh.points[:, 0] == 0.0)
-    right = np.flatnonzero(np.isclose(mesh.points[:, 0], 0.6))
-    start = mesh.points[right]
-    scene = Scene(model, forces=[Gravity()], pins=Pins(left[:1]),
-                  supports=[Sliding(left[1:], "x"), Prescribed(right, "x", motion=lambda t: start + [0.5 * t * t, 0, 0])])
+    scene = _held_in_part(mesh, model)
     solve, blocks = AMGConjugateGradient.solve, []
 
     def recording(self, matrix, *args, **kwargs):
