@@ -349,7 +349,7 @@ class ImplicitEuler(Integrator):
         if not pattern.assembles:
             # Every set is applied as a product (the smoothed rung): the matrix is the masses and diagonal scene terms
             # amid the stand-in's pattern of zero blocks, so CG multiplies its diagonal blocks alone (the same bits:
-            # a zero block adds exact zeros; 0.5 mat-vecs of the 1-ring less per product on the README beam).
+            # a zero block adds exact zeros; on the README beam 0.05 against 0.51 ms a product with scipy).
             matrix = pattern.diagonal_part(matrix)
         return _System(matrix, extra, springs, forces, self.timer() - clock, extra_full,
                        None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs, operator,
