@@ -613,19 +613,22 @@ def test_triangles_give_their_matrix_back_entry_for_entry_and_sweep_as_pyamg(sys
 
 
 @pytest.mark.parametrize("method", ["amg", "jacobi"])
-def test_a_given_first_residual_saves_its_product_and_changes_nothing(system, rhs, method):
+def test_a_given_first_residual_saves_its_product_and_changes_nothing(system, rhs, method, monkeypatch):
     """r0 = b - A x0 from the caller (the implicit step has it from its warm start): the same iterates bit for bit,
     one product with the matrix fewer."""
+    from volspring.solvers import krylov
+
     matrix, modes, _ = system
     x0 = np.linalg.solve(np.diag(matrix.diagonal()), rhs)  # a rough guess: a few iterations still to go
-    products = []
+    products, product = [], krylov.times
 
-    class Counted(sp.bsr_matrix):
-        def __matmul__(self, other):
+    def counting(operand, vectors):  # every product CG takes with the system, compiled (the fast extra) or scipy's
+        if operand is counted:
             products.append(1)
-            return super().__matmul__(other)
+        return product(operand, vectors)
 
-    counted = Counted(matrix)
+    monkeypatch.setattr(krylov, "times", counting)
+    counted = matrix.copy()
     answers = {}
     for given in (None, rhs - matrix @ x0):
         solver = make_linear_solver(method, rtol=1e-8)
