@@ -242,9 +242,10 @@ def test_the_warm_start_is_the_best_combination_of_the_previous_changes_in_the_e
         return float(difference @ (matrix @ difference))
 
     system = SimpleNamespace(matrix=matrix, products=None)
-    guess, residual = _projected_guess(system, b, history)
+    guess, residual, deflation = _projected_guess(system, b, history)
     # Its residual comes with it (CG's first, without a product of its own): b - A x0 to rounding.
     np.testing.assert_allclose(residual, b - matrix @ guess, rtol=0, atol=1e-12 * np.abs(b).max())
+    assert deflation is None  # an assembled system's hierarchy is built from it: no deflation
     # The best combination, by least squares on A^(1/2): the same up to rounding (1e-12 leaves room for 1e-15).
     coefficients = np.linalg.lstsq(history @ matrix @ history.T, history @ b, rcond=None)[0]
     np.testing.assert_allclose(guess, history.T @ coefficients, rtol=0, atol=1e-12 * np.abs(guess).max())
@@ -253,8 +254,46 @@ def test_the_warm_start_is_the_best_combination_of_the_previous_changes_in_the_e
     # A matrix-free part of the system counts too; a repeated change adds nothing and breaks nothing.
     half = SimpleNamespace(matrix=matrix / 2, products=sla.aslinearoperator(matrix / 2))
     repeated = np.concatenate([history, history[-1:]])
-    np.testing.assert_allclose(_projected_guess(half, b, repeated)[0], guess, rtol=0, atol=1e-9 * np.abs(guess).max())
+    guess_of_half, residual, deflation = _projected_guess(half, b, repeated)
+    np.testing.assert_allclose(guess_of_half, guess, rtol=0, atol=1e-9 * np.abs(guess).max())
+    # With a set applied as a product the guess brings CG's deflation: directions W spanning the changes, (A W)^T,
+    # W^T A W diagonal, and W^T r0 = 0, which deflated CG needs (each to 1e-12 of the scale of its products).
+    W = deflation.vectors.T
+    assert np.linalg.matrix_rank(np.concatenate([W, history.T], axis=1)) == 3 == W.shape[1]
+    np.testing.assert_allclose(deflation.products, (matrix @ W).T, rtol=0, atol=1e-12 * np.abs(matrix @ W).max())
+    energies = W.T @ (matrix @ W)
+    np.testing.assert_allclose(energies, np.diag(deflation.energies), rtol=0, atol=1e-12 * energies.max())
+    assert np.abs(W.T @ residual).max() <= 1e-12 * np.abs(W).max() * np.abs(b).sum()
     assert _projected_guess(system, b, np.zeros((2, 30))) is None  # a body at rest: start from zero
+
+
+def test_cg_is_deflated_by_the_changes_its_guess_is_made_from(monkeypatch):
+    """The step hands CG the directions its guess projected onto, and CG keeps its search directions A-orthogonal to
+    them: over 30 steps of a smoothed bar's fall (its preconditioner is built from a stand-in, so CG has more to
+    re-find) it needs fewer iterations than from the same guess without the deflation, for the same motion."""
+    import volspring.integrators.implicit as implicit
+
+    mesh = cube_mesh((16, 4, 4), (1.0, 0.2, 0.2))
+    model = Model.from_mesh(mesh, Material(1e6, 0.45, 1000.0), model="smoothed")
+    scene = Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] < 1e-9)))
+    guess = implicit._projected_guess
+
+    def run():
+        integrator, state, total = ImplicitEuler(), scene.initial_state(), 0
+        for _ in range(30):
+            state = integrator.step(scene, state, 0.01)
+            total += integrator.last_solve.iterations
+        return state, total
+
+    deflated, with_deflation = run()
+    monkeypatch.setattr(implicit, "_projected_guess", lambda *args: None if (made := guess(*args)) is None else
+                        (*made[:2], None))
+    plain, without = run()
+    # Measured 254 against 304 iterations (0.84); 0.92 is half that gain, which no rounding of CG's path gives.
+    assert with_deflation <= 0.92 * without, (with_deflation, without)
+    # Both are CG at rtol 1e-3 on the same systems: the bar's sag agrees far better than that (measured 1.8e-5).
+    sag = mesh.points[:, 2] - plain.x[:, 2]
+    assert np.abs(deflated.x[:, 2] - plain.x[:, 2]).max() <= 1e-3 * sag.max()
 
 
 def test_a_run_resumed_with_a_full_warm_start_history_equals_the_uninterrupted_one(tmp_path):

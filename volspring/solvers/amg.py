@@ -14,7 +14,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from volspring.kernels import compiled, unsigned
-from volspring.solvers.krylov import SolveInfo, _LinearSolver, _operator, conjugate_gradient
+from volspring.solvers.krylov import Deflation, SolveInfo, _LinearSolver, _operator, conjugate_gradient
 from typing import TYPE_CHECKING, Any
 from collections.abc import Callable
 
@@ -970,8 +970,8 @@ class AMGConjugateGradient(_LinearSolver):
 
     def solve(self, matrix: sparse.spmatrix, rhs: np.ndarray, *, x0: np.ndarray | None = None,
               extra: sparse.spmatrix | None = None, near_null_space: np.ndarray | None = None,
-              prolongation: sparse.spmatrix | None = None,
-              r0: np.ndarray | None = None) -> tuple[np.ndarray, SolveInfo]:
+              prolongation: sparse.spmatrix | None = None, r0: np.ndarray | None = None,
+              deflation: Deflation | None = None) -> tuple[np.ndarray, SolveInfo]:
         """Solve ``(matrix + extra) x = rhs``; returns ``(x, SolveInfo)``.
 
         Parameters
@@ -983,6 +983,8 @@ class AMGConjugateGradient(_LinearSolver):
             Warm start.
         r0 : (N,) float, optional
             rhs - (matrix + extra) x0, when the caller has it (one product fewer; trusted).
+        deflation : Deflation, optional
+            A subspace CG's directions stay A-orthogonal to (:func:`~volspring.solvers.krylov.conjugate_gradient`).
         extra : (N, N) sparse or LinearOperator, optional
             Added in every product, left out of the hierarchy (a matrix-free term: anything with ``@``).
         near_null_space, prolongation
@@ -1001,7 +1003,7 @@ class AMGConjugateGradient(_LinearSolver):
         start = self.timer()
         x, iterations, residual, initial = conjugate_gradient(
             _operator(matrix, extra), rhs, x0=x0, preconditioner=self.precondition, rtol=self.rtol,
-            maxiter=self.maxiter, r0=r0)
+            maxiter=self.maxiter, r0=r0, deflation=deflation)
         info = SolveInfo("amg", iterations, residual, bool(residual <= self.rtol), self.rtol, initial,
                          setup, self.timer() - start, rebuilt)
         return self._finish(x, info)
