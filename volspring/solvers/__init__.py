@@ -21,8 +21,9 @@ Three methods share one interface, ``solver.solve(matrix, rhs, x0=..., extra=...
 ``extra`` is an optional additional sparse term (e.g. a contact or field Jacobian) applied in
 every CG product but left out of the AMG hierarchy. ``r0`` is ``rhs - (matrix + extra) x0`` when the caller
 already has it (the implicit step's warm start does): CG then skips that product. ``deflation``
-(:class:`~volspring.solvers.krylov.Deflation`) keeps CG's search directions A-orthogonal to a subspace its ``x0``
-was projected on (the implicit step's past velocity changes); the direct solve ignores it.
+(:class:`~volspring.solvers.krylov.Deflation`) takes a subspace that ``x0`` was projected on out of the
+preconditioner, so that CG's search directions stay A-orthogonal to it (the implicit step's past velocity changes,
+on the rungs with sets applied as products); the direct solve ignores it.
 
 CG stops when ||b - A x|| <= rtol ||b|| (the recursively updated residual; the criterion of
 ``pyamg.krylov.cg(criteria="rr")`` and of ``scipy.sparse.linalg.cg(rtol=...)``). A solve that

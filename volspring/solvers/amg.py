@@ -984,7 +984,7 @@ class AMGConjugateGradient(_LinearSolver):
         r0 : (N,) float, optional
             rhs - (matrix + extra) x0, when the caller has it (one product fewer; trusted).
         deflation : Deflation, optional
-            A subspace CG's directions stay A-orthogonal to (:func:`~volspring.solvers.krylov.conjugate_gradient`).
+            W taken out of the preconditioner (:class:`~volspring.solvers.krylov.Deflation`).
         extra : (N, N) sparse or LinearOperator, optional
             Added in every product, left out of the hierarchy (a matrix-free term: anything with ``@``).
         near_null_space, prolongation

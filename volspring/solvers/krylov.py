@@ -119,7 +119,7 @@ def conjugate_gradient(apply: Callable[..., Any], b: ArrayLike, *, x0: ArrayLike
         b - A x0, when the caller has it already (one product fewer); used only with ``x0``, and trusted.
     deflation : Deflation, optional
         precondition with its W taken out (see :class:`Deflation`); ``x0`` should leave W^T r0 = 0 (the Galerkin
-        projection of the solution onto W), so that no search direction has a component A along W
+        projection of the solution onto W): then every search direction is A-orthogonal to W
 
     Returns
     -------
