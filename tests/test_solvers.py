@@ -661,17 +661,24 @@ def test_build_leaves_the_given_matrix_alone_and_keeps_its_own_copy(system, cell
     assert pickle.loads(pickle.dumps(solver)).precondition(b).tobytes() == before.tobytes()  # a rebuild, too
 
 
-def test_deflated_cg_searches_a_orthogonally_to_its_subspace_and_converges_sooner():
-    """Deflated CG (Saad et al. 2000) with W near the five slowest modes of a stiff box (as the implicit step's past
-    velocity changes are near its slow motion), from the Galerkin guess on W: every search direction is A-orthogonal
-    to W, so CG no longer re-finds those modes, and it needs fewer iterations than plain CG from the same guess."""
-    matrix, _, _ = spring_system((12, 3, 3), h_omega=1000.0)  # 624 unknowns: the dense checks below stay cheap
+def _near_slow_modes(rng):
+    """A stiff box's dense matrix (624 unknowns: the dense checks stay cheap) and W near its five slowest modes, as the
+    implicit step's past velocity changes are near its slow motion, with W^T A W diagonal as the step's guess makes
+    it: (A, W, its diagonal)."""
+    matrix, _, _ = spring_system((12, 3, 3), h_omega=1000.0)
     A = matrix.toarray()
-    rng = np.random.default_rng(2)
     slowest = np.linalg.eigh(A)[1][:, :5]  # eigenvalues 17.6 to 482; the sixth is 930, the largest 6.6e5
     W = slowest + 0.02 * rng.standard_normal(slowest.shape) / np.sqrt(len(A))
     energies, directions = np.linalg.eigh(W.T @ A @ W)
-    W = W @ directions  # W^T A W diagonal, as the step's guess makes it
+    return A, W @ directions, energies
+
+
+def test_deflated_cg_searches_a_orthogonally_to_its_subspace_and_converges_sooner():
+    """CG deflated by W near the slowest modes, from the Galerkin guess on W (then it is Saad et al.'s deflated CG):
+    every search direction is A-orthogonal to W, so CG no longer re-finds those modes, and it needs fewer iterations
+    than plain CG from the same guess."""
+    rng = np.random.default_rng(2)
+    A, W, energies = _near_slow_modes(rng)
     deflation = Deflation(np.ascontiguousarray(W.T), np.ascontiguousarray((A @ W).T), energies)
     b = rng.standard_normal(len(A))
     x0 = W @ (W.T @ b / energies)
@@ -703,12 +710,8 @@ def test_deflation_that_rounding_has_spoiled_still_converges_to_the_answer():
     """Rounding leaves the step's (A W)^T and W^T r0 off by much more than 1e-16 when A is stiff and W soft (a hair
     strand: 1e-7 and 3e-6, measured). The deflation's preconditioner corrects the residual's part along W (Q r)
     instead of leaving it, so CG still reaches rtol, in about as many iterations as without the deflation."""
-    matrix, _, _ = spring_system((12, 3, 3), h_omega=1000.0)
-    A = matrix.toarray()
     rng = np.random.default_rng(3)
-    W = np.linalg.eigh(A)[1][:, :5] + 0.02 * rng.standard_normal((len(A), 5)) / np.sqrt(len(A))
-    energies, directions = np.linalg.eigh(W.T @ A @ W)
-    W = W @ directions
+    A, W, energies = _near_slow_modes(rng)
     spoiled = (A @ W) * (1.0 + 1e-5 * rng.standard_normal(W.shape))  # (A W) off by 1e-5: worse than measured
     deflation = Deflation(np.ascontiguousarray(W.T), np.ascontiguousarray(spoiled.T), energies)
     b = rng.standard_normal(len(A))
