@@ -578,14 +578,17 @@ def _projected_guess(system: _System, b: np.ndarray,
     Directions the changes hardly span (energy below :data:`WARM_START_CUTOFF` of the largest) are left out; None
     when nothing is left.
 
-    The products serve CG once more where some set is applied as a product, so that the AMG hierarchy was built from
-    a stand-in: the directions kept deflate CG's preconditioner (a :class:`~volspring.solvers.krylov.Deflation`), so
-    that CG does not search again along what the guess settled. On the README beam (3,321 nodes, dt 0.01 s, steps
+    The products serve CG once more where CG adds products to the matrix's (sets applied as products, whose AMG
+    hierarchy was built from their stand-in, or a scene force's Jacobian such as contact's): the directions kept
+    deflate CG's preconditioner (a :class:`~volspring.solvers.krylov.Deflation`), so that CG does not search again
+    along what the guess settled. On the README beam (3,321 nodes, dt 0.01 s, steps
     3-32 from rest) that takes the smoothed rung from 6.1 to 5.5 CG iterations a step, its step from 68.8 to 61.1 ms
     with the ``fast`` extra (66.7 to 63.0 in another run) and from 124.4 to 120.5 ms without; the volume rung from
     5.7 to 5.3 iterations and 53.8 to 50.7 ms without the extra. The springs' hierarchy is built from their own
     matrix: there the deflation saved 0.14 of 2.1 iterations a step and cost about 0.3 ms a step more than it saved
-    (3%). (Scratch ``ab_rung.py``, ``its38.py`` and ``defl_cost.py``, stop 38.)
+    (3%). In ``benchmarks/bench_contact_rungs.py``'s contact scene it changes little (CG iterations 4.3 -> 4.2,
+    4.9 -> 4.8 and 5.9 -> 5.9 on the three rungs). (Scratch ``ab_rung.py``, ``its38.py`` and ``defl_cost.py``,
+    stop 38.)
     """
     vectors = history.T  # (N, k)
     products, applied = times(system.matrix, vectors), system.products  # the property builds a new operator per access
@@ -599,7 +602,7 @@ def _projected_guess(system: _System, b: np.ndarray,
     directions, energies = directions[:, kept], energies[kept]
     coefficients = directions @ ((directions.T @ (vectors.T @ b)) / energies)
     deflation = None
-    if applied is not None:  # the hierarchy was built from a stand-in: worth the deflation's cost (see above)
+    if applied is not None:  # CG's operator is more than the hierarchy's matrix: worth the deflation (see above)
         # W^T and (A W)^T as C-ordered rows: a copy of the transposed (N, k) products costs ten times their product.
         deflation = Deflation(directions.T @ history, directions.T @ products.T, energies)
     return vectors @ coefficients, b - products @ coefficients, deflation

@@ -23,7 +23,7 @@ every CG product but left out of the AMG hierarchy. ``r0`` is ``rhs - (matrix + 
 already has it (the implicit step's warm start does): CG then skips that product. ``deflation``
 (:class:`~volspring.solvers.krylov.Deflation`) takes a subspace that ``x0`` was projected on out of the
 preconditioner, so that CG's search directions stay A-orthogonal to it (the implicit step's past velocity changes,
-on the rungs with sets applied as products); the direct solve ignores it.
+where CG adds products to the matrix's: the upper rungs' sets, contact); the direct solve ignores it.
 
 CG stops when ||b - A x|| <= rtol ||b|| (the recursively updated residual; the criterion of
 ``pyamg.krylov.cg(criteria="rr")`` and of ``scipy.sparse.linalg.cg(rtol=...)``). A solve that
