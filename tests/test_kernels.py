@@ -302,6 +302,8 @@ def test_gradients_and_stresses_of_the_wrong_shape_are_refused_before_the_kernel
         kinematics.spread(np.zeros((10, 3, 3)), model.node_count)
     with pytest.raises(ValueError, match=r"positions have 10 rows"):
         kinematics.deformation(np.zeros((10, 3)))
+    with pytest.raises(ValueError, match=r"expected \(144, 3\) values, one row per node; got shape \(144, 2\)"):
+        kinematics.deformation(np.zeros((model.node_count, 2)))  # rows enough, but two columns
 
 
 def random_bsr(rng, block_rows, block_columns, blocksize, density):

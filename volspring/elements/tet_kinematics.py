@@ -110,7 +110,7 @@ class TetGradients:
         kernels = compiled()
         if kernels is not None:  # the same sums, compiled (volspring.kernels)
             out = np.empty((len(self.tets), 3, 3))
-            kernels.gathered(*self._kernel_columns[0], np.ascontiguousarray(x), out)
+            kernels.gathered(*self._kernel_columns[0], _node_rows(x, matrices[0].shape[1]), out)
             return out
         return np.stack([G @ x for G in matrices], axis=2)
 
