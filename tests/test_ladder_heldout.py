@@ -44,6 +44,17 @@ def test_smoothed_rung_tracks_the_reference_where_springs_do_not(name, nu):
     assert abs(ratios["smoothed"] - 1) < 0.4 * abs(ratios["springs"] - 1)
 
 
+@pytest.mark.xfail(strict=True, reason="issue 11's deflection goal is not met: the capsule reads 1.045 of the "
+                   "reference at nu 0.3 and the torus 0.968 at 0.49, and no single alpha brings both within 3% "
+                   "(README, 'The default alpha'). When this passes, make it a plain test")
+def test_smoothed_rung_meets_the_deflection_goal_on_every_held_out_shape():
+    """The issue's goal itself, beside the regression floor above: within 3% of the reference on every shape."""
+    misses = {(name, nu): _ratios(name, nu)["smoothed"] - 1 for name in HELDOUT_CASE_NAMES for nu in (0.3, 0.49)}
+    # 3% is the issue's goal (against converged P2; the same-mesh Taylor-Hood reference here is within 0.5-1.4% of
+    # it on the torus, capsule and L-bracket, module docstring).
+    assert max(abs(miss) for miss in misses.values()) < 0.03, misses
+
+
 @pytest.mark.parametrize("name", HELDOUT_CASE_NAMES)
 def test_no_locking_from_nu_045_to_0499(name):
     """The issue's goal: the deflection ratio moves by less than 3% from nu 0.45 to 0.499 (P1 loses over 40%).
