@@ -15,7 +15,7 @@ from volspring.sweep import sweep_client
 # A case of each kind (static, modal, held-out shape) and two studies, the speed study split per run on
 # the cluster, on coarse meshes.
 CASES = ["cantilever_gravity", "cantilever_modes", "cauchy", "speed", "torus_gravity"]
-# The speed study's cheapest runs of --quick's, one of them diverging: what the cluster does to the study (a task per
+# The speed study's cheapest runs of --quick's, two of them diverging: what the cluster does to the study (a task per
 # run, merged in order, the Pareto front marked over all) shows on five runs as on eighteen, and the quick study
 # took 31 s serially here, its five runs 1.5 s (scratch speed_runs39.py, stop 39).
 SPEED_STEPS = {"explicit_euler": (0.2,), "symplectic_euler": (0.9, 1.05), "implicit_euler": (100.0, 1000.0)}
