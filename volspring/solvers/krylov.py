@@ -154,9 +154,12 @@ def conjugate_gradient(apply: Callable[..., Any], b: ArrayLike, *, x0: ArrayLike
     iterations = 0
     if norm_r <= target:
         return x, 0, initial, initial
-    z = preconditioner(r) if preconditioner is not None else r.copy()
-    if deflation is not None:
-        z = deflation.corrected(z, r)
+
+    def precondition(r):  # z = M^-1 r, or (P^T M^-1 + Q) r with the deflation
+        z = preconditioner(r) if preconditioner is not None else r
+        return z if deflation is None else deflation.corrected(z, r)
+
+    z = precondition(r)
     p = z.copy()
     rz = float(np.dot(r, z))
     while iterations < maxiter:
@@ -173,9 +176,7 @@ def conjugate_gradient(apply: Callable[..., Any], b: ArrayLike, *, x0: ArrayLike
         norm_r = float(np.linalg.norm(r))
         if norm_r <= target:
             break
-        z = preconditioner(r) if preconditioner is not None else r
-        if deflation is not None:
-            z = deflation.corrected(z, r)
+        z = precondition(r)
         rz_new = float(np.dot(r, z))
         p *= rz_new / rz
         p += z
