@@ -276,14 +276,19 @@ def test_a_continuum_sets_forces_products_and_blocks_are_numpys_bit_for_bit(whic
 
 
 @needs_numba
-def test_a_product_with_the_wrong_rows_is_refused_before_the_kernel_reads_them():
-    from volspring.elements import CorotatedTets
+@pytest.mark.parametrize("kind", ["CorotatedTets", "NodalStrain"])
+def test_a_product_with_the_wrong_rows_is_refused_before_the_kernel_reads_them(kind):
+    # The compiled products index u by the mesh's nodes, unchecked: short arrays would be read past their end.
+    import volspring.elements
 
-    model, tets = element_set("smoothed", CorotatedTets)
+    model, continuum = element_set("smoothed", getattr(volspring.elements, kind), lambda each: each.shear.any())
     x, _ = disturbed(model, 0.02, seed=6)
     kernels.select("numba")
+    lin = continuum.linearize_operator(x)
     with pytest.raises(ValueError, match=r"u has 10 rows; expected 144"):
-        tets.linearize_operator(x).scaled_times(np.zeros((10, 3)))
+        lin.scaled_times(np.zeros((10, 3)))
+    with pytest.raises(ValueError, match=r"u has 10 rows; expected 144"):
+        lin.scaled_times_many(np.zeros((10, 3, 5)))
 
 
 @needs_numba

@@ -280,8 +280,28 @@ class CorotatedTets(_TetContinuum):
             forces += self._damping_forces(twist_directions(U, Vt), coefficients, v)
         rows = twist_rows(U, Vt, self.kinematics.gradients)  # (T, r, a, i) = (q_r g_a)_i
         rows *= np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))[:, :, None, None]
+        signs, L = np.sign(coefficients), self._scalar_part
+        kernels = compiled()
+        if kernels is not None:  # the same sums compiled, tet by tet (volspring._compiled.corotated_times)
+            n, tets = self.node_count, self._kernel_tets
+            scalar_indptr, scalar_indices = unsigned(L.indptr), unsigned(L.indices)
+            rows = rows.reshape(-1, 3, 12)
+
+            def compiled_times_many(U):
+                U = np.ascontiguousarray(U, dtype=np.float64)
+                if U.ndim != 3 or U.shape[:2] != (n, 3):  # the kernel does not check its indices
+                    raise ValueError(f"u has {len(U)} rows; expected {n}, one per node")
+                out = np.empty(U.shape)
+                kernels.corotated_times(scalar_indptr, scalar_indices, L.data, tets, rows, signs, U, out)
+                return out
+
+            def compiled_times(u):
+                return compiled_times_many(np.reshape(u, (-1, 3, 1)))[:, :, 0]
+
+            return self._operator(forces, compiled_times, x, stiffness_scale, damping_scale, compiled_times_many)
+
         indices, indptr = self._twist_layout
-        signs, L = np.sign(coefficients).ravel(), self._scalar_part
+        signs = signs.ravel()
         Q = sp.csr_matrix((rows.ravel(), indices, indptr), shape=(len(indptr) - 1, 3 * self.node_count))
         Qt = Q.T
 
@@ -294,23 +314,12 @@ class CorotatedTets(_TetContinuum):
         def times(u):
             return times_many(np.reshape(u, (-1, 3, 1)))[:, :, 0]
 
-        kernels = compiled()
-        if kernels is not None:  # the same sums compiled, each twist row read once (volspring.kernels)
-            data, n = rows.reshape(-1), self.node_count
-            scalar_indptr, scalar_indices = unsigned(L.indptr), unsigned(L.indices)
-            twist_indptr, twist_indices = unsigned(indptr), unsigned(indices)
-
-            def compiled_times(u):
-                u = np.ascontiguousarray(u, dtype=np.float64).reshape(-1, 3)
-                if u.shape != (n, 3):  # the kernel does not check its indices
-                    raise ValueError(f"u has {len(u)} rows; expected {n}, one per node")
-                out = np.empty((n, 3))
-                kernels.corotated_times(scalar_indptr, scalar_indices, L.data, twist_indptr, twist_indices, data,
-                                        signs, u, out)
-                return out
-
-            times = compiled_times
         return self._operator(forces, times, x, stiffness_scale, damping_scale, times_many)
+
+    @cached_property
+    def _kernel_tets(self):
+        """(T, 4) unsigned -- the tets' corners as the compiled product indexes them (:func:`unsigned`)."""
+        return unsigned(np.ascontiguousarray(self.kinematics.tets))
 
     @cached_property
     def _twist_layout(self):
@@ -572,6 +581,8 @@ class NodalStrain(_TetContinuum):
             weights = (self.shear * domains.volumes)[:, None, None]
             kernels = compiled()
             if kernels is not None:  # the same sums compiled, column by column (each column's sums are as alone)
+                if n != self.node_count:  # the kernel does not check its indices
+                    raise ValueError(f"u has {n} rows; expected {self.node_count}, one per node")
                 averaging, spreading = domains.averaging_layout, domains.spreading_layout
                 twists, coefficients, weights = state["twists"], state["coefficients"], weights.reshape(-1)
                 for j in range(k):
