@@ -535,7 +535,15 @@ class NodalStrain(_TetContinuum):
     def _ring_volume_gradients(self, state):
         """(r, 3) -- dv_d/dx_a for every ring entry (d, a): each tet corner's dv_t/dx_a times the share of the
         tet's volume in the domain of each of its corners, summed by one sparse product."""
-        return self._ring_sum @ self._volume_gradients(state).reshape(-1, 3)
+        gradients = self._volume_gradients(state).reshape(-1, 3)
+        kernels = compiled()
+        if kernels is not None:  # the same sums compiled (scipy's product with three columns: 2.8 ms a step)
+            total = self._ring_sum
+            out = np.empty((total.shape[0], 3))
+            kernels.csr_times(unsigned(total.indptr), unsigned(total.indices), total.data,
+                              np.ascontiguousarray(gradients), out)
+            return out
+        return self._ring_sum @ gradients
 
     @cached_property
     def _ring_sum(self):

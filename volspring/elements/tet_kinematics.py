@@ -549,9 +549,15 @@ def _stress_array(stress, count) -> np.ndarray:
 
 
 def _kernel_arrays(matrices) -> tuple:
-    """(indptr, indices) of each CSR matrix (viewed unsigned, for a compiled kernel), then the data of each."""
-    layout = tuple(array for matrix in matrices for array in (unsigned(matrix.indptr), unsigned(matrix.indices)))
-    return layout + tuple(matrix.data for matrix in matrices)
+    """(indptr, indices, data) of three CSR matrices of one pattern for a compiled kernel: the shared index arrays
+    (viewed unsigned) and the data side by side, (e, 3), so that a kernel reads each row's indices once for the
+    three. A ValueError if their patterns differ."""
+    first = matrices[0]
+    if not all(np.array_equal(m.indptr, first.indptr) and np.array_equal(m.indices, first.indices)
+               for m in matrices[1:]):
+        raise ValueError("the three matrices of a compiled gather or spread must share one sparsity pattern")
+    return (unsigned(first.indptr), unsigned(first.indices),
+            np.ascontiguousarray(np.stack([m.data for m in matrices], axis=1)))
 
 
 def pair_nodes(points: ArrayLike, tets: ArrayLike) -> np.ndarray:
