@@ -246,7 +246,7 @@ def test_the_corotation_is_numpys_bit_for_bit_inverted_tets_included(project):
 
     def corotation():
         U, Vt, psi, P, coefficients = corotated(F, project=project)
-        return U, Vt, psi, P, coefficients, twist_rows(U, Vt, vectors)
+        return U, Vt, psi, P, coefficients, twist_rows(U, Vt, vectors), twist_rows(U, Vt, vectors, coefficients)
 
     assert_each_the_same_under_both(corotation)
 

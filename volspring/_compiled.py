@@ -14,9 +14,9 @@ import numba
 import numpy as np
 
 __all__ = ["block_product", "block_product_rows", "block_times", "cofactor", "corotated_parts", "corotated_times",
-           "csr_times", "finest_down", "finest_up", "gathered", "jacobi_eigh", "nodal_shear_times", "polar_fast",
-           "spread", "spring_block_sum", "spring_linearization", "spring_stiffness_times", "twist_directions",
-           "twist_rows", "volume_gradients"]
+           "csr_times", "finest_down", "finest_up", "gathered", "gram_entries", "jacobi_eigh", "nodal_shear_times",
+           "polar_fast", "spread", "spring_block_sum", "spring_linearization", "spring_stiffness_times",
+           "twist_directions", "twist_rows", "volume_gradients"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -397,19 +397,38 @@ def corotated_parts(F, U, s, Vt, project, psi, P, coefficients):  # pragma: no c
 
 
 @_jit
-def twist_rows(U, Vt, vectors, half_root, out):  # pragma: no cover (compiled)
+def twist_rows(U, Vt, vectors, half_root, scale, out):  # pragma: no cover (compiled)
     """:func:`volspring.elements.tet_kinematics.twist_rows` per matrix, the same operations: writes q_r a into ``out``
-    (m, 3, k, 3) for the k vectors a of each matrix (``vectors`` (m, k, 3))."""
+    (m, 3, k, 3) for the k vectors a of each matrix (``vectors`` (m, k, 3)), times ``scale[t, r]`` when ``scale``
+    has rows (as numpy multiplies the rows it made)."""
+    scaled = scale.shape[0] > 0
     for t in range(vectors.shape[0]):
+        s0, s1, s2 = (scale[t, 0], scale[t, 1], scale[t, 2]) if scaled else (1.0, 1.0, 1.0)
         for a in range(vectors.shape[1]):
             g0, g1, g2 = vectors[t, a, 0], vectors[t, a, 1], vectors[t, a, 2]
             along0 = ((g0 * Vt[t, 0, 0] + g1 * Vt[t, 0, 1]) + g2 * Vt[t, 0, 2]) * half_root
             along1 = ((g0 * Vt[t, 1, 0] + g1 * Vt[t, 1, 1]) + g2 * Vt[t, 1, 2]) * half_root
             along2 = ((g0 * Vt[t, 2, 0] + g1 * Vt[t, 2, 1]) + g2 * Vt[t, 2, 2]) * half_root
             for c in range(3):
-                out[t, 0, a, c] = along1 * U[t, c, 0] - along0 * U[t, c, 1]
-                out[t, 1, a, c] = along2 * U[t, c, 0] - along0 * U[t, c, 2]
-                out[t, 2, a, c] = along2 * U[t, c, 1] - along1 * U[t, c, 2]
+                row0 = along1 * U[t, c, 0] - along0 * U[t, c, 1]
+                row1 = along2 * U[t, c, 0] - along0 * U[t, c, 2]
+                row2 = along2 * U[t, c, 1] - along1 * U[t, c, 2]
+                if scaled:
+                    row0, row1, row2 = row0 * s0, row1 * s1, row2 * s2
+                out[t, 0, a, c], out[t, 1, a, c], out[t, 2, a, c] = row0, row1, row2
+
+
+@_jit
+def gram_entries(F, out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """The upper triangle of F^T F of each (m, 3, 3) ``F`` into ``out`` (6, m), in the order (0, 0), (0, 1), (0, 2),
+    (1, 1), (1, 2), (2, 2), each entry summed as :func:`volspring.elements.tet_kinematics._gram_entries` sums it:
+    (F_0i F_0j + F_1i F_1j) + F_2i F_2j."""
+    for k in range(F.shape[0]):
+        slot = 0
+        for i in range(3):
+            for j in range(i, 3):
+                out[slot, k] = (F[k, 0, i] * F[k, 0, j] + F[k, 1, i] * F[k, 1, j]) + F[k, 2, i] * F[k, 2, j]
+                slot += 1
 
 
 @numba.njit(nogil=True, inline="always")

@@ -278,8 +278,8 @@ class CorotatedTets(_TetContinuum):
         forces = self._forces_from(P)
         if v is not None and self.stiffness_damping:
             forces += self._damping_forces(twist_directions(U, Vt), coefficients, v)
-        rows = twist_rows(U, Vt, self.kinematics.gradients)  # (T, r, a, i) = (q_r g_a)_i
-        rows *= np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))[:, :, None, None]
+        scale = np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))
+        rows = twist_rows(U, Vt, self.kinematics.gradients, scale)  # (T, r, a, i) = sqrt(2 w |c_r|) (q_r g_a)_i
         signs, L = np.sign(coefficients), self._scalar_part
         kernels = compiled()
         if kernels is not None:  # the same sums compiled, tet by tet (volspring._compiled.corotated_times)

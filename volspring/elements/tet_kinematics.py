@@ -161,13 +161,18 @@ def _jacobi_rows(C, sweeps=_JACOBI_SWEEPS):
     The entries are kept as separate contiguous arrays (one per matrix entry), so each rotation is a few
     dozen vector operations over all m matrices: about eight times faster than ``np.linalg.eigh`` or
     ``np.linalg.svd`` on 15,000 matrices, which call LAPACK once per matrix. ``C`` is (m, 3, 3), or a dict of
-    the upper triangle's entries {(i, j): (m,) array, i <= j} (taken over and changed).
+    the upper triangle's entries {(i, j): (m,) array, i <= j}, or those entries as rows (6, m) in :data:`_UPPER`'s
+    order (either taken over and changed).
     """
-    a = C if isinstance(C, dict) else {(i, j): C[:, i, j].copy() for i in range(3) for j in range(i, 3)}
+    if isinstance(C, np.ndarray) and C.shape[0] == 6 and C.ndim == 2:
+        a = dict(zip(_UPPER, C))
+    else:
+        a = C if isinstance(C, dict) else {(i, j): C[:, i, j].copy() for i in range(3) for j in range(i, 3)}
     m = len(a[0, 0])
     kernels = compiled()
     if kernels is not None:  # the same rotations in the same order, compiled (volspring.kernels)
-        entries = np.array([a[key] for key in _UPPER], dtype=np.float64)
+        entries = C if isinstance(C, np.ndarray) and C.ndim == 2 else \
+            np.array([a[key] for key in _UPPER], dtype=np.float64)
         vectors = np.empty((9, m))
         converged = kernels.jacobi_eigh(entries, sweeps, _JACOBI_MAX_SWEEPS, _ROTATION_TABLE, vectors)
         return entries, vectors, converged
@@ -209,13 +214,16 @@ def rotation_preserving_svd(F: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.n
     """
     F = np.ascontiguousarray(F, dtype=np.float64)
     m = len(F)
-    rows = np.ascontiguousarray(F.transpose(1, 2, 0))  # rows[k, i] = F_ki over all matrices
-    entries, vectors, converged = _jacobi_rows(_gram_entries(rows))
     U, s, Vt = np.empty((m, 3, 3)), np.empty((m, 3)), np.empty((m, 3, 3))
     kernels = compiled()
-    if kernels is not None:
+    if kernels is not None:  # the same operations, compiled: F^T F's entries straight from F, in the Jacobi's rows
+        gram = np.empty((6, m))
+        kernels.gram_entries(F, gram)
+        entries, vectors, converged = _jacobi_rows(gram)
         fast = kernels.polar_fast(F, entries, vectors, converged, _JACOBI_CONDITION**2, U, s, Vt)
     else:
+        rows = np.ascontiguousarray(F.transpose(1, 2, 0))  # rows[k, i] = F_ki over all matrices
+        entries, vectors, converged = _jacobi_rows(_gram_entries(rows))
         fast = _polar_fast(rows, entries, vectors, converged, U, s, Vt)
     slow = np.flatnonzero(~fast)
     if len(slow):
@@ -342,17 +350,21 @@ def twist_directions(U: np.ndarray, Vt: np.ndarray) -> np.ndarray:
     return result
 
 
-def twist_rows(U: np.ndarray, Vt: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+def twist_rows(U: np.ndarray, Vt: np.ndarray, vectors: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
     """(m, 3, k, 3) -- q_r a of each twist q_r of :func:`twist_directions` (U, Vt) and each of the k vectors a of
     ``vectors`` (m, k, 3), without forming q_r: q_r a = (u_i (v_j . a) - u_j (v_i . a)) / sqrt 2, each v . a summed
-    in a fixed order, so that the compiled kernel (:func:`volspring._compiled.twist_rows`) makes the same bits."""
+    in a fixed order, so that the compiled kernel (:func:`volspring._compiled.twist_rows`) makes the same bits;
+    each times ``scale[:, r]`` when it is given ((m, 3): the kernel scales the rows as it makes them, numpy after)."""
     U, Vt = np.ascontiguousarray(U, dtype=np.float64), np.ascontiguousarray(Vt, dtype=np.float64)
     vectors = np.ascontiguousarray(vectors, dtype=np.float64)
     m, k = vectors.shape[:2]
     out = np.empty((m, 3, k, 3))
     kernels = compiled()
     if kernels is not None:
-        kernels.twist_rows(U, Vt, vectors, _HALF_ROOT, out)
+        factors = np.empty((0, 3)) if scale is None else np.ascontiguousarray(scale, dtype=np.float64)
+        if factors.shape not in ((0, 3), (m, 3)):  # the kernel does not check its indices
+            raise ValueError(f"scale has shape {factors.shape}; expected ({m}, 3), one factor per twist")
+        kernels.twist_rows(U, Vt, vectors, _HALF_ROOT, factors, out)
         return out
     x, y, z = vectors[:, :, 0], vectors[:, :, 1], vectors[:, :, 2]
     along = [((x * Vt[:, c, 0, None] + y * Vt[:, c, 1, None]) + z * Vt[:, c, 2, None]) * _HALF_ROOT
@@ -360,6 +372,8 @@ def twist_rows(U: np.ndarray, Vt: np.ndarray, vectors: np.ndarray) -> np.ndarray
     for r, (i, j) in enumerate(_TWIST_PAIRS):
         for c in range(3):
             np.subtract(along[j] * U[:, c, i, None], along[i] * U[:, c, j, None], out=out[:, r, :, c])
+    if scale is not None:
+        out *= np.asarray(scale, dtype=np.float64)[:, :, None, None]
     return out
 
 
