@@ -272,7 +272,9 @@ class CorotatedTets(_TetContinuum):
         scalar matrix L (the 1-ring, built once) times each component, minus a rank-3-per-tet part
         Q^T diag(sign c) Q, Q the (3 T, 3 n) rows sqrt(2 w |c_r|) q_r g_a filled in a fixed layout at each
         linearisation. K u = L u - Q^T (sign c * (Q u)): three sparse products (the twist projection of
-        every tet by dF = G u and a spread took six and a Hessian per tet, about three times as long)."""
+        every tet by dF = G u and a spread took six and a Hessian per tet, about three times as long). With the
+        ``fast`` extra the same sums run tet by tet (:func:`volspring._compiled.corotated_times`), and Q is never
+        made as a sparse matrix."""
         x = np.asarray(x, dtype=np.float64)
         U, Vt, _, P, coefficients = corotated(self.kinematics.deformation(x))
         forces = self._forces_from(P)
