@@ -311,6 +311,21 @@ def test_gradients_and_stresses_of_the_wrong_shape_are_refused_before_the_kernel
         kinematics.deformation(np.zeros((model.node_count, 2)))  # rows enough, but two columns
 
 
+def test_three_matrices_of_different_patterns_are_refused_as_one_kernel_layout():
+    # The compiled gathers and spreads read one pattern for the three matrices of a tet set's or a domain set's
+    # columns (shared by construction); matrices that do not share it must not be laid out as if they did.
+    import scipy.sparse as sp
+
+    from volspring.elements.tet_kinematics import _kernel_arrays
+
+    one = sp.csr_matrix(np.array([[1.0, 0.0], [0.0, 2.0]]))
+    other = sp.csr_matrix(np.array([[1.0, 3.0], [0.0, 2.0]]))
+    indptr, indices, data = _kernel_arrays((one, one, one))
+    assert data.shape == (2, 3) and np.array_equal(data[:, 1], one.data)
+    with pytest.raises(ValueError, match="must share one sparsity pattern"):
+        _kernel_arrays((one, other, one))
+
+
 def random_bsr(rng, block_rows, block_columns, blocksize, density):
     """A BSR matrix of random blocks, some block rows empty, its block columns in no particular order."""
     import scipy.sparse as sp
