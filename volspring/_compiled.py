@@ -480,8 +480,8 @@ def nodal_shear_times(ip, ix, a, u, twists, coefficients, weights, sp, sx, s,
     ``ix``, data ``a`` (e, 3); dFbar[i, c] from matrix c), the corotational Hessian on it (``_hessian_times``'s
     order) times 2 and the domain's weight, spread back by the three spreading matrices (``sp``, ``sx``, ``s``) and
     summed over them as ``sum()`` sums numpy's three products. Every sum from zero in scipy's entry order: the same
-    bits. Each row's indices are read once for the three matrices (1.08 against 0.82 ms on the README beam's
-    smoothed rung when each matrix had its own: scratch ``nodal40.py``)."""
+    bits. Each row's indices are read once for the three matrices (0.82 ms a product on the README beam's smoothed
+    rung, against 1.08 when each matrix had its own: scratch ``nodal40.py``)."""
     d = ip.shape[0] - 1
     stress = np.empty((d, 3, 3))
     dF = np.empty((3, 3))

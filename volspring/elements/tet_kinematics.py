@@ -164,15 +164,15 @@ def _jacobi_rows(C, sweeps=_JACOBI_SWEEPS):
     the upper triangle's entries {(i, j): (m,) array, i <= j}, or those entries as rows (6, m) in :data:`_UPPER`'s
     order (either taken over and changed).
     """
-    if isinstance(C, np.ndarray) and C.shape[0] == 6 and C.ndim == 2:
+    as_rows = isinstance(C, np.ndarray) and C.ndim == 2
+    if as_rows:
         a = dict(zip(_UPPER, C))
     else:
         a = C if isinstance(C, dict) else {(i, j): C[:, i, j].copy() for i in range(3) for j in range(i, 3)}
     m = len(a[0, 0])
     kernels = compiled()
     if kernels is not None:  # the same rotations in the same order, compiled (volspring.kernels)
-        entries = C if isinstance(C, np.ndarray) and C.ndim == 2 else \
-            np.array([a[key] for key in _UPPER], dtype=np.float64)
+        entries = C if as_rows else np.array([a[key] for key in _UPPER], dtype=np.float64)
         vectors = np.empty((9, m))
         converged = kernels.jacobi_eigh(entries, sweeps, _JACOBI_MAX_SWEEPS, _ROTATION_TABLE, vectors)
         return entries, vectors, converged
