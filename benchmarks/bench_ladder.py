@@ -6,9 +6,13 @@ rung takes ``--steps`` implicit steps (AMG-preconditioned CG, ``ImplicitEuler()`
 two warm-up steps (the hierarchy build); the script prints per rung the median wall time per step,
 its ratio to the springs' step, the CG iterations per step, the 3x3 blocks assembled (the continuum
 sets are applied as products and only their 1-ring stand-in is assembled, for the preconditioner),
-and one product with the system as the step applies it, as a ratio to the springs' mat-vec. Rungs are timed
-alternately, ``--rounds`` times, and the median of the rounds is reported, so a drift of the
-machine's speed hits every rung alike.
+and one product with the system as the step applies it, as a ratio to the springs' mat-vec. The rungs (and the
+``--kernels`` choices) run side by side and are timed step by step in turn: one step of each, then the next step of
+each in the reverse order, so that a drift of the machine's speed hits every rung alike (this 2-core machine's moves
+by a third within minutes: at stop 41, a springs run of 30 steps then a smoothed one, in six processes, gave ratios
+from 3.25x to 6.51x; timed side by side, the rounds' ratios lay within 3.67-4.71x, 4.00-4.43x and 4.12-4.52x in
+three runs). ``--rounds`` repeats the runs from rest; the medians of the rounds are reported, the ratio as the
+median of each round's ratio.
 
 Run (one thread, as every timing in this project)::
 
@@ -60,6 +64,35 @@ def time_steps(scene, steps, dt):
         times.append(time.perf_counter() - start)
         iterations.append(integrator.last_solve.iterations)
     return statistics.median(times), float(np.mean(iterations))
+
+
+def time_side_by_side(scenes, steps, dt, choices):
+    """Runs of every scene (and kernel choice) from rest, their steps timed in turn: after two warm-up steps each (the
+    hierarchy build), step k of every run, in one order for even k and the reverse for odd k. Returns {(choice,
+    name): (median seconds per step, mean CG iterations per step)}."""
+    from volspring import kernels
+    from volspring.integrators.implicit import ImplicitEuler
+
+    runs = {}
+    for choice in choices:
+        kernels.select(choice)
+        for name, scene in scenes.items():
+            integrator = ImplicitEuler()
+            cache = integrator.new_cache()
+            state = scene.initial_state()
+            for _ in range(2):
+                state = integrator.step(scene, state, dt, cache=cache)
+            runs[choice, name] = [scene, integrator, cache, state, [], []]
+    keys = list(runs)
+    for k in range(steps):
+        for key in keys if k % 2 == 0 else keys[::-1]:
+            scene, integrator, cache, state, times, iterations = run = runs[key]
+            kernels.select(key[0])
+            start = time.perf_counter()
+            run[3] = integrator.step(scene, state, dt, cache=cache)
+            times.append(time.perf_counter() - start)
+            iterations.append(integrator.last_solve.iterations)
+    return {key: (statistics.median(run[4]), float(np.mean(run[5]))) for key, run in runs.items()}
 
 
 def matvec_seconds(scene, repeats=20):
@@ -161,27 +194,26 @@ def main():
     step_times = {(choice, rung): [] for choice in args.kernels for rung in MODELS}
     iterations, matvec = {}, {}
     for _ in range(args.rounds):
-        for choice in args.kernels:
-            kernels.select(choice)
-            for rung, scene in scenes.items():
-                seconds, iterations[choice, rung] = time_steps(scene, args.steps, args.dt)
-                step_times[choice, rung].append(seconds)
+        for key, (seconds, iterations[key]) in time_side_by_side(scenes, args.steps, args.dt, args.kernels).items():
+            step_times[key].append(seconds)
     for choice in args.kernels:
         kernels.select(choice)
         for rung, scene in scenes.items():
             matvec[choice, rung] = matvec_seconds(scene)
     for choice in args.kernels:
         kernels.select(choice)
-        base = statistics.median(step_times[choice, "springs"])
+        springs = step_times[choice, "springs"]
         base_mv = matvec[choice, "springs"][0]
         print(f"kernels: {kernels.active()} ({choice})")
         print(f"{'rung':16s} {'ms/step':>9s} {'x springs':>10s} {'CG its':>7s} {'blocks':>9s} {'x springs':>10s} "
-              f"{'mat-vec x':>10s}")
+              f"{'mat-vec x':>10s}   x springs in each round")
         for rung in MODELS:
             seconds = statistics.median(step_times[choice, rung])
+            ratios = [mine / base for mine, base in zip(step_times[choice, rung], springs)]
             mv, blocks = matvec[choice, rung]
-            print(f"{rung:16s} {1e3 * seconds:9.1f} {seconds / base:10.2f} {iterations[choice, rung]:7.1f} "
-                  f"{blocks:9d} {blocks / matvec[choice, 'springs'][1]:10.2f} {mv / base_mv:10.2f}")
+            print(f"{rung:16s} {1e3 * seconds:9.1f} {statistics.median(ratios):10.2f} {iterations[choice, rung]:7.1f} "
+                  f"{blocks:9d} {blocks / matvec[choice, 'springs'][1]:10.2f} {mv / base_mv:10.2f}   "
+                  + " ".join(f"{ratio:.2f}" for ratio in ratios))
     if len(args.kernels) == 2:
         first, second = args.kernels
         print(f"step with {second} / with {first}: " + ", ".join(
