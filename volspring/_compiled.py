@@ -567,6 +567,42 @@ def cofactor(F, out):  # pragma: no cover (compiled; the fast tests compare it w
 
 
 @_jit
+def volume_ratios(F, cof, volumes, corner_domain, corner_share, domain_volumes,
+                  J):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """:meth:`volspring.elements.NodalStrain._volume_ratios` into ``J`` (d,), zeros on entry: det F_t = cof(F_t) : F_t
+    / 3, its nine products summed in row order; V_t det F_t times each corner's share added to the corner's domain,
+    tet after tet and corner after corner (np.bincount's order); then each domain's sum over its volume."""
+    for t in range(F.shape[0]):
+        total = cof[t, 0, 0] * F[t, 0, 0] + cof[t, 0, 1] * F[t, 0, 1]
+        total += cof[t, 0, 2] * F[t, 0, 2]
+        total += cof[t, 1, 0] * F[t, 1, 0]
+        total += cof[t, 1, 1] * F[t, 1, 1]
+        total += cof[t, 1, 2] * F[t, 1, 2]
+        total += cof[t, 2, 0] * F[t, 2, 0]
+        total += cof[t, 2, 1] * F[t, 2, 1]
+        total += cof[t, 2, 2] * F[t, 2, 2]
+        weight = volumes[t] * (total / 3.0)
+        for c in range(4):
+            J[corner_domain[t, c]] += weight * corner_share[t, c]
+    for d in range(J.shape[0]):
+        J[d] = J[d] / domain_volumes[d]
+
+
+@_jit
+def pressure_stress(pressure, corner_domain, corner_share, volumes, cof,
+                    out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
+    """:meth:`volspring.elements.NodalStrain._pressure_stress` into ``out`` (T, 3, 3): V_t pbar_t cof(F_t), with pbar_t
+    the corners' domain pressures weighted by their shares and summed corner after corner."""
+    for t in range(cof.shape[0]):
+        mean = (pressure[corner_domain[t, 0]] * corner_share[t, 0] + pressure[corner_domain[t, 1]] * corner_share[t, 1])
+        mean = (mean + pressure[corner_domain[t, 2]] * corner_share[t, 2]) + pressure[corner_domain[t, 3]] * corner_share[t, 3]
+        weight = mean * volumes[t]
+        for i in range(3):
+            for j in range(3):
+                out[t, i, j] = weight * cof[t, i, j]
+
+
+@_jit
 def twist_directions(U, Vt, root, out):  # pragma: no cover (compiled; the fast tests compare it with numpy)
     """:func:`volspring.elements.tet_kinematics.twist_directions` per matrix, the same operations: q_r[c, k] =
     (U[c, i] V^T[j, k] - U[c, j] V^T[i, k]) / ``root`` (sqrt 2) for the pairs (i, j) = (0, 1), (0, 2), (1, 2)."""

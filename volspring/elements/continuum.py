@@ -481,15 +481,33 @@ class NodalStrain(_TetContinuum):
         if self.bulk.any() if volume is None else volume:
             F = self.kinematics.deformation(x)
             cof = _cofactor(F)
-            det = np.einsum("tij,tij->t", cof, F) / 3.0
-            current = np.bincount(self.domains.corner_domain.ravel(),
-                                  weights=((self.kinematics.volumes * det)[:, None] * self.domains.corner_share).ravel(),
-                                  minlength=self.domains.domain_count)
-            state.update(F=F, cof=cof, det=det, J=current / self.domains.volumes)
+            state.update(F=F, cof=cof, J=self._volume_ratios(F, cof))
         if self.shear.any():
             psi, P, twists, coefficients = corotational(self.domains.averaged(x), project=project)
             state.update(psi=psi, P=P, twists=twists, coefficients=coefficients)
         return state
+
+    def _volume_ratios(self, F, cof):
+        """(d,) -- each domain's volume ratio J_d = sum of V_t det F_t over its tets' corners, weighted by the corners'
+        shares, over V_d. det F = cof(F) : F / 3 with its nine products summed in row order, and the corners summed in
+        the order of the tets and their corners (np.bincount's), so that the compiled kernel
+        (:func:`volspring._compiled.volume_ratios`) makes the same bits."""
+        domains = self.domains
+        kernels = compiled()
+        if kernels is not None:
+            J = np.zeros(domains.domain_count)
+            kernels.volume_ratios(np.ascontiguousarray(F), cof, self.kinematics.volumes, domains.corner_domain,
+                                  domains.corner_share, domains.volumes, J)
+            return J
+        products = (cof * F).reshape(-1, 9)
+        det = products[:, 0] + products[:, 1]
+        for k in range(2, 9):
+            det += products[:, k]
+        det /= 3.0
+        current = np.bincount(domains.corner_domain.ravel(),
+                              weights=((self.kinematics.volumes * det)[:, None] * domains.corner_share).ravel(),
+                              minlength=domains.domain_count)
+        return current / domains.volumes
 
     def energy(self, x: np.ndarray) -> float:
         state = self._state(np.asarray(x, dtype=np.float64), True)
@@ -517,11 +535,8 @@ class NodalStrain(_TetContinuum):
     def _forces(self, state):
         forces = np.zeros((self.node_count, 3))
         if self.bulk.any():
-            pressure = self.bulk * (state["J"] - 1.0)
-            mean_pressure = self._mean_pressure(pressure)
             # dv_t/dx_a = V_t cof(F_t) g_ta: the pressure forces spread V_t pbar_t cof(F_t) like a stress.
-            weights = mean_pressure * self.kinematics.volumes
-            forces -= self.kinematics.spread(weights[:, None, None] * state["cof"], self.node_count)
+            forces -= self.kinematics.spread(self._pressure_stress(state), self.node_count)
         if "P" in state:
             forces -= self.domains.spread((self.shear * self.domains.volumes)[:, None, None] * state["P"])
         return forces
@@ -560,8 +575,21 @@ class NodalStrain(_TetContinuum):
         return total
 
     def _mean_pressure(self, pressure):
-        """(T,) -- pbar_t: the pressures of the domains of a tet's corners, weighted by the corners' shares."""
-        return np.einsum("tc,tc->t", pressure[self.domains.corner_domain], self.domains.corner_share)
+        """(T,) -- pbar_t: the pressures of the domains of a tet's corners, weighted by the corners' shares and summed
+        corner after corner (:func:`volspring._compiled.pressure_stress`'s order)."""
+        p, share = pressure[self.domains.corner_domain], self.domains.corner_share
+        return ((p[:, 0] * share[:, 0] + p[:, 1] * share[:, 1]) + p[:, 2] * share[:, 2]) + p[:, 3] * share[:, 3]
+
+    def _pressure_stress(self, state):
+        """(T, 3, 3) -- V_t pbar_t cof(F_t), what the pressure forces spread (pressures kappa_d (J_d - 1))."""
+        pressure = self.bulk * (state["J"] - 1.0)
+        kernels = compiled()
+        if kernels is not None:
+            stress = np.empty(state["cof"].shape)
+            kernels.pressure_stress(pressure, self.domains.corner_domain, self.domains.corner_share,
+                                    self.kinematics.volumes, state["cof"], stress)
+            return stress
+        return (self._mean_pressure(pressure) * self.kinematics.volumes)[:, None, None] * state["cof"]
 
     def _stiffness_times(self, state, u):
         """(n, 3) -- K u with the projected K at ``state``, without forming K."""
