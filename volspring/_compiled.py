@@ -594,8 +594,9 @@ def pressure_stress(pressure, corner_domain, corner_share, volumes, cof,
     """:meth:`volspring.elements.NodalStrain._pressure_stress` into ``out`` (T, 3, 3): V_t pbar_t cof(F_t), with pbar_t
     the corners' domain pressures weighted by their shares and summed corner after corner."""
     for t in range(cof.shape[0]):
-        mean = (pressure[corner_domain[t, 0]] * corner_share[t, 0] + pressure[corner_domain[t, 1]] * corner_share[t, 1])
-        mean = (mean + pressure[corner_domain[t, 2]] * corner_share[t, 2]) + pressure[corner_domain[t, 3]] * corner_share[t, 3]
+        p0, p1 = pressure[corner_domain[t, 0]], pressure[corner_domain[t, 1]]
+        p2, p3 = pressure[corner_domain[t, 2]], pressure[corner_domain[t, 3]]
+        mean = ((p0 * corner_share[t, 0] + p1 * corner_share[t, 1]) + p2 * corner_share[t, 2]) + p3 * corner_share[t, 3]
         weight = mean * volumes[t]
         for i in range(3):
             for j in range(3):
