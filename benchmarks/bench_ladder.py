@@ -10,9 +10,9 @@ and one product with the system as the step applies it, as a ratio to the spring
 ``--kernels`` choices) run side by side and are timed step by step in turn: one step of each, then the next step of
 each in the reverse order, so that a drift of the machine's speed hits every rung alike (this 2-core machine's moves
 by a third within minutes: at stop 41, a springs run of 30 steps then a smoothed one, in six processes, gave ratios
-from 3.25x to 6.51x; timed side by side, the rounds' ratios lay within 3.67-4.71x, 4.00-4.43x and 4.12-4.52x in
-three runs). ``--rounds`` repeats the runs from rest; the medians of the rounds are reported, the ratio as the
-median of each round's ratio.
+from 3.25x to 6.51x; timed side by side, a run's five rounds lay within 3.67-4.71x that busy morning, and within
+3.90-4.04x on a quiet machine). ``--rounds`` repeats the runs from rest; the medians of the rounds are reported, the
+ratio as the median of each round's ratio.
 
 Run (one thread, as every timing in this project)::
 
