@@ -49,33 +49,17 @@ def build(rung, cells, nu=0.45):
     return Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0)))
 
 
-def time_steps(scene, steps, dt):
-    from volspring.integrators.implicit import ImplicitEuler
-
-    integrator = ImplicitEuler()
-    cache = integrator.new_cache()
-    state = scene.initial_state()
-    for _ in range(2):
-        state = integrator.step(scene, state, dt, cache=cache)
-    times, iterations = [], []
-    for _ in range(steps):
-        start = time.perf_counter()
-        state = integrator.step(scene, state, dt, cache=cache)
-        times.append(time.perf_counter() - start)
-        iterations.append(integrator.last_solve.iterations)
-    return statistics.median(times), float(np.mean(iterations))
-
-
-def time_side_by_side(scenes, steps, dt, choices):
-    """Runs of every scene (and kernel choice) from rest, their steps timed in turn: after two warm-up steps each (the
-    hierarchy build), step k of every run, in one order for even k and the reverse for odd k. Returns {(choice,
-    name): (median seconds per step, mean CG iterations per step)}."""
+def time_side_by_side(scenes, steps, dt, choices=(None,)):
+    """Runs of every scene (and kernel choice; None: the one selected) from rest, their steps timed in turn: after two
+    warm-up steps each (the hierarchy build), step k of every run, in one order for even k and the reverse for odd k.
+    Returns {(choice, name): (median seconds per step, mean CG iterations per step)}."""
     from volspring import kernels
     from volspring.integrators.implicit import ImplicitEuler
 
     runs = {}
     for choice in choices:
-        kernels.select(choice)
+        if choice is not None:
+            kernels.select(choice)
         for name, scene in scenes.items():
             integrator = ImplicitEuler()
             cache = integrator.new_cache()
@@ -87,7 +71,8 @@ def time_side_by_side(scenes, steps, dt, choices):
     for k in range(steps):
         for key in keys if k % 2 == 0 else keys[::-1]:
             scene, integrator, cache, state, times, iterations = run = runs[key]
-            kernels.select(key[0])
+            if key[0] is not None:
+                kernels.select(key[0])
             start = time.perf_counter()
             run[3] = integrator.step(scene, state, dt, cache=cache)
             times.append(time.perf_counter() - start)
@@ -159,7 +144,8 @@ def levers(scenes, args):
         for rung in rungs:
             for way in WAYS:
                 with guess(way):
-                    times[rung, way].append(time_steps(scenes[rung], args.steps, args.dt)[0])
+                    seconds, _ = time_side_by_side({rung: scenes[rung]}, args.steps, args.dt)[None, rung]
+                    times[rung, way].append(seconds)
     print(f"\nlever: CG's first guess applies the system to the last {WARM_START} velocity changes at once")
     print(f"{'rung':16s} {'products at once':>17s} {'one by one':>11s} {'ms/step at once':>16s} {'one by one':>11s} "
           f"{'ratio':>6s}   (products: in the springs' mat-vecs)")
