@@ -414,6 +414,15 @@ class BlockPattern:
         return LinearOperator((self.size, self.size), matvec=times, rmatvec=times, matmat=times_many,
                               rmatmat=times_many, dtype=np.float64)
 
+    def operator_diagonal(self, linearization: ModelLinearization) -> np.ndarray | None:
+        """(f, 3, 3) -- the diagonal blocks of :meth:`operator` over the free nodes, or None when no set is applied as a
+        product or one of them does not give its diagonal."""
+        applied = [lin for part, lin in zip(self.parts, linearization.parts) if part.operator]
+        blocks = [lin.diagonal_blocks() for lin in applied]
+        if not blocks or any(block is None for block in blocks):
+            return None
+        return sum(blocks)[self.free_nodes]
+
     def wrap(self, data: np.ndarray) -> sp.bsr_matrix:
         """A BSR matrix around a data array of this pattern (no copy, no format check)."""
         matrix = sp.bsr_matrix((data, self.indices, self.indptr), shape=(self.size, self.size), copy=False)

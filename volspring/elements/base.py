@@ -122,14 +122,18 @@ class OperatorLinearization(Linearization):
     times_many : callable, optional
         ``times_many(U) -> K U`` for (n, 3, k) U, each column the bits of ``times`` (the sparse factors read once
         for all k); default ``times`` column by column
+    diagonal : callable, optional
+        ``diagonal() -> (n, 3, 3)`` the diagonal blocks of the scaled stiffness, or None when the set does not give
+        them
     """
 
     def __init__(self, forces: np.ndarray, times: Callable[[np.ndarray], np.ndarray], scale: float,
                  element_set: ElementSet, preconditioner: Callable[[], np.ndarray] | None,
-                 times_many: Callable[[np.ndarray], np.ndarray] | None = None):
+                 times_many: Callable[[np.ndarray], np.ndarray] | None = None, *,
+                 diagonal: Callable[[], np.ndarray] | None = None):
         super().__init__(forces, None, None, element_set)
         self._times, self.scale, self._preconditioner = times, float(scale), preconditioner
-        self._times_many = times_many
+        self._times_many, self._diagonal = times_many, diagonal
 
     def dfdx_times(self, u: np.ndarray) -> np.ndarray:
         return -self._times(u)
@@ -148,6 +152,10 @@ class OperatorLinearization(Linearization):
         """(n, 3, k) float -- :meth:`scaled_times_many` one column after another (each product reads the set's
         factors again)."""
         return self.scale * np.stack([self._times(np.ascontiguousarray(U[:, :, j])) for j in range(U.shape[2])], axis=2)
+
+    def diagonal_blocks(self) -> np.ndarray | None:
+        """(n, 3, 3) -- the diagonal blocks of c_K K + c_D C, or None when the set does not give them."""
+        return None if self._diagonal is None else self._diagonal()
 
     def preconditioner_blocks(self) -> np.ndarray | None:
         """The set's stand-in blocks for the preconditioner, already scaled (None: it adds nothing to the stand-in)."""

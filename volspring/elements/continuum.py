@@ -128,6 +128,11 @@ class _TetContinuum(ElementSet):
         """(T, 4) int -- the tets: the stand-in blocks of :meth:`preconditioner_blocks` couple the 1-ring only."""
         return self.kinematics.tets
 
+    @abstractmethod
+    def diagonal_blocks(self, x: np.ndarray) -> np.ndarray:
+        """(n, 3, 3) -- the diagonal blocks of the projected stiffness at x (those of :meth:`stiffness_blocks`
+        assembled), without the rest of it: what the preconditioner compares its stand-in's with."""
+
     def damping_blocks(self, x: np.ndarray) -> np.ndarray | None:
         if not self.stiffness_damping:
             return None
@@ -143,7 +148,8 @@ class _TetContinuum(ElementSet):
             blocks = self.preconditioner_blocks(x)
             return None if blocks is None else scale * blocks
 
-        return OperatorLinearization(forces, times, scale, self, preconditioner, times_many)
+        return OperatorLinearization(forces, times, scale, self, preconditioner, times_many,
+                                     diagonal=lambda: scale * self.diagonal_blocks(x))
 
     def with_stiffness_damping(self, b: float) -> Self:
         """A copy with Rayleigh stiffness damping b [s] (the kinematics and domains are shared)."""
@@ -240,6 +246,16 @@ class CorotatedTets(_TetContinuum):
         _, _, twists, coefficients = corotational(self.kinematics.deformation(np.asarray(x, dtype=np.float64)),
                                                   project=clamp_compression)
         return self._blocks(twists, coefficients).reshape(-1, 16, 3, 3)
+
+    def diagonal_blocks(self, x: np.ndarray) -> np.ndarray:
+        """(n, 3, 3) -- the diagonal blocks of the projected stiffness at x: per tet corner a, 2 w_t ((g_a . g_a) I
+        - sum_r c_r (q_r g_a)(q_r g_a)^T), summed over each node's tets."""
+        _, _, twists, coefficients = corotational(self.kinematics.deformation(np.asarray(x, dtype=np.float64)))
+        g = self.kinematics.gradients.reshape(-1, 3)  # corner by corner
+        plain, scaled = _twist_vectors(np.repeat(twists, 4, axis=0), np.repeat(coefficients, 4, axis=0), g)
+        blocks = np.einsum("ei,ei->e", g, g)[:, None, None] * np.eye(3) - np.matmul(np.swapaxes(scaled, 1, 2), plain)
+        blocks *= np.repeat(2.0 * self._weights(), 4)[:, None, None]
+        return _node_sums(self.kinematics.tets.ravel(), blocks, self.node_count)
 
     def linearize(self, x: ArrayLike, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
                   damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
@@ -647,8 +663,14 @@ class NodalStrain(_TetContinuum):
             result += domains.spread_many(np.stack(dP, axis=-1))
         return result
 
-    def _blocks(self, state, exact):
+    def _blocks(self, state, exact, pairs=None):
+        """(p, 1, 3, 3) -- the blocks of every ring pair, or of the ring pairs ``pairs`` (indices) alone."""
         first, second = self.domains.pairs
+        identity = self._identity_blocks
+        if pairs is not None:
+            if exact:
+                raise ValueError("the exact blocks are made for every pair at once")
+            first, second, identity = first[pairs], second[pairs], identity[pairs]
         V = self.domains.volumes
         blocks = np.zeros((len(first), 3, 3))
         if "J" in state:
@@ -661,7 +683,7 @@ class NodalStrain(_TetContinuum):
             plain, scaled = _twist_vectors(state["twists"][entry_domain], state["coefficients"][entry_domain],
                                            self.domains.ring_gradient)
             blocks -= np.matmul(np.swapaxes(root * scaled, 1, 2)[first], (root * plain)[second])
-            blocks += self._identity_blocks
+            blocks += identity
         if exact and "J" in state:
             blocks += self._volume_curvature(state)
         return blocks[:, None]
@@ -694,6 +716,15 @@ class NodalStrain(_TetContinuum):
     def stiffness_blocks(self, x: np.ndarray, *, clamp_compression: bool = True) -> np.ndarray:
         state = self._state(np.asarray(x, dtype=np.float64), clamp_compression)
         return self._blocks(state, not clamp_compression)
+
+    def diagonal_blocks(self, x: np.ndarray) -> np.ndarray:
+        """(n, 3, 3) -- the diagonal blocks of the projected stiffness at x: :meth:`stiffness_blocks`' of the ring
+        pairs that join a node to itself, summed over each node's domains."""
+        state = self._state(np.asarray(x, dtype=np.float64), True)
+        first, second = self.domains.pairs
+        nodes = self.domains.ring_node
+        own = np.flatnonzero(nodes[first] == nodes[second])
+        return _node_sums(nodes[first[own]], self._blocks(state, False, own)[:, 0], self.node_count)
 
     def linearize(self, x: ArrayLike, v: ArrayLike | None = None, *, stiffness_scale: float = 1.0,
                   damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
@@ -813,6 +844,14 @@ class NodalStrain(_TetContinuum):
     def __repr__(self) -> str:
         return (f"NodalStrain({self.domains.domain_count} domains, {self.element_count} ring pairs, "
                 f"b={self.stiffness_damping:g} s)")
+
+
+def _node_sums(nodes, blocks, node_count) -> np.ndarray:
+    """(node_count, 3, 3) -- the (e, 3, 3) ``blocks`` summed by their ``nodes`` (e,)."""
+    sums = np.zeros((node_count, 9))
+    for k in range(9):
+        sums[:, k] = np.bincount(nodes, weights=blocks.reshape(-1, 9)[:, k], minlength=node_count)
+    return sums.reshape(-1, 3, 3)
 
 
 def _cofactor(F) -> np.ndarray:
