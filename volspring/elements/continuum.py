@@ -37,7 +37,7 @@ mass-proportional part is :class:`volspring.forces.Drag`.
 from __future__ import annotations
 
 from abc import abstractmethod
-from functools import cached_property
+from functools import cached_property, partial
 
 import numpy as np
 import scipy.sparse as sp
@@ -142,14 +142,16 @@ class _TetContinuum(ElementSet):
         """c_K + c_D b: the factor of K in the system (the damping blocks are b K)."""
         return stiffness_scale + damping_scale * self.stiffness_damping
 
-    def _operator(self, forces, times, x, stiffness_scale, damping_scale, times_many=None) -> OperatorLinearization:
+    def _operator(self, forces, times, x, stiffness_scale, damping_scale, times_many, diagonal) -> OperatorLinearization:
+        """The linearisation; ``diagonal``: () -> (n, 3, 3) the diagonal blocks of K, from the linearisation's own
+        state (:meth:`diagonal_blocks` without its kinematics)."""
         scale = self._scale(stiffness_scale, damping_scale)
         def preconditioner():
             blocks = self.preconditioner_blocks(x)
             return None if blocks is None else scale * blocks
 
         return OperatorLinearization(forces, times, scale, self, preconditioner, times_many,
-                                     diagonal=lambda: scale * self.diagonal_blocks(x))
+                                     diagonal=lambda: scale * diagonal())
 
     def with_stiffness_damping(self, b: float) -> Self:
         """A copy with Rayleigh stiffness damping b [s] (the kinematics and domains are shared)."""
@@ -250,12 +252,24 @@ class CorotatedTets(_TetContinuum):
     def diagonal_blocks(self, x: np.ndarray) -> np.ndarray:
         """(n, 3, 3) -- the diagonal blocks of the projected stiffness at x: per tet corner a, 2 w_t ((g_a . g_a) I
         - sum_r c_r (q_r g_a)(q_r g_a)^T), summed over each node's tets."""
-        _, _, twists, coefficients = corotational(self.kinematics.deformation(np.asarray(x, dtype=np.float64)))
-        g = self.kinematics.gradients.reshape(-1, 3)  # corner by corner
-        plain, scaled = _twist_vectors(np.repeat(twists, 4, axis=0), np.repeat(coefficients, 4, axis=0), g)
-        blocks = np.einsum("ei,ei->e", g, g)[:, None, None] * np.eye(3) - np.matmul(np.swapaxes(scaled, 1, 2), plain)
-        blocks *= np.repeat(2.0 * self._weights(), 4)[:, None, None]
-        return _node_sums(self.kinematics.tets.ravel(), blocks, self.node_count)
+        rows, signs = self._twist_rows(np.asarray(x, dtype=np.float64))[:2]
+        return self._diagonal(rows, signs)
+
+    def _twist_rows(self, x):
+        """(rows, signs, U, V^T, P, coefficients) at x: the rows (T, 3, 4, 3) sqrt(2 w |c_r|) q_r g_a of the
+        twist part of K and their signs (T, 3), with the corotation they are made from."""
+        U, Vt, _, P, coefficients = corotated(self.kinematics.deformation(x))
+        scale = np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))
+        return twist_rows(U, Vt, self.kinematics.gradients, scale), np.sign(coefficients), U, Vt, P, coefficients
+
+    def _diagonal(self, rows, signs):
+        """(n, 3, 3) -- the diagonal blocks of K = L - Q^T diag(signs) Q from its twist rows: L's diagonal times I,
+        less sum_r sign_r (rows_r a)(rows_r a)^T of each tet corner a, summed over each node's tets."""
+        R = np.ascontiguousarray(np.reshape(rows, (-1, 3, 4, 3)).transpose(1, 3, 0, 2))  # (r, i, T, a)
+        S = R * signs.T[:, None, :, None]
+        twist = [(S[0, i] * R[0, j] + S[1, i] * R[1, j]) + S[2, i] * R[2, j] for i, j in _UPPER_ENTRIES]
+        return self._scalar_part.diagonal()[:, None, None] * np.eye(3) - \
+            _node_sums(self.kinematics.tets.ravel(), [entry.ravel() for entry in twist], self.node_count)
 
     def linearize(self, x: ArrayLike, v: np.ndarray | None = None, *, stiffness_scale: float = 1.0,
                   damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
@@ -292,13 +306,12 @@ class CorotatedTets(_TetContinuum):
         ``fast`` extra the same sums run tet by tet (:func:`volspring._compiled.corotated_times`), and Q is never
         made as a sparse matrix."""
         x = np.asarray(x, dtype=np.float64)
-        U, Vt, _, P, coefficients = corotated(self.kinematics.deformation(x))
+        rows, signs, U, Vt, P, coefficients = self._twist_rows(x)  # rows (T, r, a, i) = sqrt(2 w |c_r|) (q_r g_a)_i
         forces = self._forces_from(P)
         if v is not None and self.stiffness_damping:
             forces += self._damping_forces(twist_directions(U, Vt), coefficients, v)
-        scale = np.sqrt(2.0 * self._weights()[:, None] * np.abs(coefficients))
-        rows = twist_rows(U, Vt, self.kinematics.gradients, scale)  # (T, r, a, i) = sqrt(2 w |c_r|) (q_r g_a)_i
-        signs, L = np.sign(coefficients), self._scalar_part
+        L = self._scalar_part
+        diagonal = partial(self._diagonal, rows, signs)
         kernels = compiled()
         if kernels is not None:  # the same sums compiled, tet by tet (volspring._compiled.corotated_times)
             n, tets = self.node_count, self._kernel_tets
@@ -316,7 +329,8 @@ class CorotatedTets(_TetContinuum):
             def compiled_times(u):
                 return compiled_times_many(np.reshape(u, (-1, 3, 1)))[:, :, 0]
 
-            return self._operator(forces, compiled_times, x, stiffness_scale, damping_scale, compiled_times_many)
+            return self._operator(forces, compiled_times, x, stiffness_scale, damping_scale, compiled_times_many,
+                                  diagonal)
 
         indices, indptr = self._twist_layout
         signs = signs.ravel()
@@ -332,7 +346,7 @@ class CorotatedTets(_TetContinuum):
         def times(u):
             return times_many(np.reshape(u, (-1, 3, 1)))[:, :, 0]
 
-        return self._operator(forces, times, x, stiffness_scale, damping_scale, times_many)
+        return self._operator(forces, times, x, stiffness_scale, damping_scale, times_many, diagonal)
 
     @cached_property
     def _kernel_tets(self):
@@ -663,14 +677,8 @@ class NodalStrain(_TetContinuum):
             result += domains.spread_many(np.stack(dP, axis=-1))
         return result
 
-    def _blocks(self, state, exact, pairs=None):
-        """(p, 1, 3, 3) -- the blocks of every ring pair, or of the ring pairs ``pairs`` (indices) alone."""
+    def _blocks(self, state, exact):
         first, second = self.domains.pairs
-        identity = self._identity_blocks
-        if pairs is not None:
-            if exact:
-                raise ValueError("the exact blocks are made for every pair at once")
-            first, second, identity = first[pairs], second[pairs], identity[pairs]
         V = self.domains.volumes
         blocks = np.zeros((len(first), 3, 3))
         if "J" in state:
@@ -683,7 +691,7 @@ class NodalStrain(_TetContinuum):
             plain, scaled = _twist_vectors(state["twists"][entry_domain], state["coefficients"][entry_domain],
                                            self.domains.ring_gradient)
             blocks -= np.matmul(np.swapaxes(root * scaled, 1, 2)[first], (root * plain)[second])
-            blocks += identity
+            blocks += self._identity_blocks
         if exact and "J" in state:
             blocks += self._volume_curvature(state)
         return blocks[:, None]
@@ -718,13 +726,33 @@ class NodalStrain(_TetContinuum):
         return self._blocks(state, not clamp_compression)
 
     def diagonal_blocks(self, x: np.ndarray) -> np.ndarray:
-        """(n, 3, 3) -- the diagonal blocks of the projected stiffness at x: :meth:`stiffness_blocks`' of the ring
-        pairs that join a node to itself, summed over each node's domains."""
-        state = self._state(np.asarray(x, dtype=np.float64), True)
-        first, second = self.domains.pairs
-        nodes = self.domains.ring_node
-        own = np.flatnonzero(nodes[first] == nodes[second])
-        return _node_sums(nodes[first[own]], self._blocks(state, False, own)[:, 0], self.node_count)
+        """(n, 3, 3) -- the diagonal blocks of the projected stiffness at x: those of :meth:`stiffness_blocks` that
+        join a ring entry to itself (a domain's ring holds each node once), summed over each node's domains."""
+        return self._diagonal(self._state(np.asarray(x, dtype=np.float64), True))
+
+    def _diagonal(self, state):
+        """:meth:`diagonal_blocks` at a linearisation's ``state``: per ring entry a of domain d, kappa_d / V_d
+        (dv_d/dx_a)(dv_d/dx_a)^T and 2 mu_d V_d ((gbar_a . gbar_a) I - sum_r c_r (q_r gbar_a)(q_r gbar_a)^T)."""
+        domains = self.domains
+        domain, V = domains.ring_domain, domains.volumes
+        entries = [np.zeros(len(domain)) for _ in _UPPER_ENTRIES]  # entry (i, j) of every ring entry's block
+        if "J" in state:
+            w = np.ascontiguousarray((self._ring_volume_gradients(state) * np.sqrt(self.bulk / V)[domain][:, None]).T)
+            for entry, (i, j) in zip(entries, _UPPER_ENTRIES):
+                entry += w[i] * w[j]
+        if "P" in state:
+            if "twist_entries" not in state:
+                state["twist_entries"] = _twist_entries(state["twists"])
+            twists = state["twist_entries"][..., domain]  # (r, i, j, a): the twists of each entry's domain
+            g = np.ascontiguousarray(domains.ring_gradient.T)
+            plain = (twists[..., 0, :] * g[0] + twists[..., 1, :] * g[1]) + twists[..., 2, :] * g[2]  # q_r gbar_a
+            scaled = state["coefficients"][domain].T[:, None, :] * plain
+            weight = (2.0 * self.shear * V)[domain]
+            dots = (g[0] * g[0] + g[1] * g[1]) + g[2] * g[2]
+            for entry, (i, j) in zip(entries, _UPPER_ENTRIES):
+                twist = (scaled[0, i] * plain[0, j] + scaled[1, i] * plain[1, j]) + scaled[2, i] * plain[2, j]
+                entry += weight * ((dots if i == j else 0.0) - twist)
+        return _node_sums(domains.ring_node, entries, self.node_count)
 
     def linearize(self, x: ArrayLike, v: ArrayLike | None = None, *, stiffness_scale: float = 1.0,
                   damping_scale: float = 0.0, clamp_compression: bool = True) -> Linearization:
@@ -786,7 +814,8 @@ class NodalStrain(_TetContinuum):
             forces -= self.stiffness_damping * self._stiffness_times(state, np.asarray(v, dtype=np.float64))
         return self._operator(forces, lambda u: self._stiffness_times(state, np.asarray(u, dtype=np.float64)), x,
                               stiffness_scale, damping_scale,
-                              lambda U: self._stiffness_times_many(state, np.asarray(U, dtype=np.float64)))
+                              lambda U: self._stiffness_times_many(state, np.asarray(U, dtype=np.float64)),
+                              partial(self._diagonal, state))
 
     def per_tet(self) -> dict:
         """The constructor's per-tet inputs back: ``shear``, ``bulk``, ``regions`` and ``stand_in_bulk`` (T,) arrays.
@@ -846,12 +875,16 @@ class NodalStrain(_TetContinuum):
                 f"b={self.stiffness_damping:g} s)")
 
 
-def _node_sums(nodes, blocks, node_count) -> np.ndarray:
-    """(node_count, 3, 3) -- the (e, 3, 3) ``blocks`` summed by their ``nodes`` (e,)."""
-    sums = np.zeros((node_count, 9))
-    for k in range(9):
-        sums[:, k] = np.bincount(nodes, weights=blocks.reshape(-1, 9)[:, k], minlength=node_count)
-    return sums.reshape(-1, 3, 3)
+_UPPER_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # a symmetric 3x3 matrix's upper triangle
+
+
+def _node_sums(nodes, entries, node_count) -> np.ndarray:
+    """(node_count, 3, 3) -- e symmetric blocks summed by their ``nodes`` (e,), from their upper triangles' entries
+    (six (e,) arrays in :data:`_UPPER_ENTRIES`' order)."""
+    sums = np.empty((node_count, 3, 3))
+    for entry, (i, j) in zip(entries, _UPPER_ENTRIES):
+        sums[:, i, j] = sums[:, j, i] = np.bincount(nodes, weights=entry, minlength=node_count)
+    return sums
 
 
 def _cofactor(F) -> np.ndarray:

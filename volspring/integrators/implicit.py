@@ -147,6 +147,7 @@ class _System:
     held_rhs: np.ndarray | None = None  # (3f,) what the held values put into the right-hand side (0 on held rows)
     operator: LinearOperator | None = None  # the sets applied as products (held unknowns masked), or None
     preconditioner_matrix: Callable[[], sp.bsr_matrix] | None = None  # () -> the matrix with their stand-in blocks
+    operator_diagonal: Callable[[], np.ndarray | None] | None = None  # () -> (f, 3, 3) the operator's diagonal blocks
     folded: np.ndarray | None = None  # (f, 3) the scene forces' diagonal Jacobian term, folded into the matrix
     touched: int = 0  # free unknowns on which the scene forces' Jacobian has a row (contact's grow and shrink)
     stiffness_times: np.ndarray | None = None  # (n, 3) the element sets' dF/dx @ u for _assemble's ``times``
@@ -169,6 +170,24 @@ class _System:
         """The matrix with the extra term added, BSR with 3x3 blocks (what the AMG hierarchy is given);
         with sets applied as products, their stand-in blocks instead of them."""
         return self.stand_in if self.extra is None else sp.bsr_matrix(self.stand_in + self.extra, blocksize=(3, 3))
+
+    @cached_property
+    def exact_diagonal(self) -> np.ndarray | None:
+        """(f, 3, 3) -- the diagonal blocks of the system CG iterates on (matrix, extra term and the sets applied as
+        products), where the AMG hierarchy is built from a stand-in for it; None where it is not (every set
+        assembled) or a set does not give its diagonal."""
+        if self.operator_diagonal is None:
+            return None
+        applied = self.operator_diagonal()
+        if applied is None:
+            return None
+        from pyamg.util.utils import get_block_diag
+
+        if self.held is not None:  # the operator is masked on the held unknowns' rows and columns (_assemble)
+            keep = (~self.held).reshape(-1, 3).astype(np.float64)
+            applied = applied * (keep[:, :, None] * keep[:, None, :])
+        whole = self.matrix if self.extra is None else sp.bsr_matrix(self.matrix + self.extra, blocksize=(3, 3))
+        return get_block_diag(whole, blocksize=3, inv_flag=False) + applied
 
     @property
     def products(self):
@@ -334,6 +353,9 @@ class ImplicitEuler(Integrator):
             standing_in = pattern.matrix(springs, diagonal, preconditioner=True)
             return standing_in if held is None else eliminate_held(pattern, standing_in, held)[0]
 
+        def operator_diagonal():  # the diagonal blocks of the sets applied as products
+            return pattern.operator_diagonal(springs)
+
         held = held_rhs = None
         if scene.partly_held:
             held = held_unknowns(pattern, scene.held)
@@ -353,7 +375,8 @@ class ImplicitEuler(Integrator):
             matrix = pattern.diagonal_part(matrix)
         return _System(matrix, extra, springs, forces, self.timer() - clock, extra_full,
                        None if dfdx is None else sp.csr_matrix(dfdx), held, held_rhs, operator,
-                       None if operator is None else preconditioner, folded, touched, stiffness_times)
+                       None if operator is None else preconditioner, None if operator is None else operator_diagonal,
+                       folded, touched, stiffness_times)
 
     def linear_system(self, scene: Scene, state: State,
                       dt: float) -> tuple[sparse.spmatrix, sparse.spmatrix | None, BlockPattern]:
@@ -404,7 +427,8 @@ class ImplicitEuler(Integrator):
         # the hierarchy too, so that the preconditioner sees the contact stiffness CG iterates on.
         # Aggregates from the couplings of the system without it, though: see AMGConjugateGradient.build.
         seconds = cache.solver.build(system.whole, rigid_body_modes(x[pattern.free_nodes]),
-                                     aggregation=None if system.extra is None else system.stand_in)
+                                     aggregation=None if system.extra is None else system.stand_in,
+                                     exact_diagonal=system.exact_diagonal)
         cache.built(pattern, step, t, dt, x, v)
         # What the scene forces' Jacobian was at the build: the steps that reuse the hierarchy give it their change
         # (_solve; the stand-in blocks of sets applied as products, a linearisation of their own, stay the build's).
