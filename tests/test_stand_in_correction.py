@@ -157,3 +157,34 @@ def test_the_correction_adds_no_momentum_to_a_residual_that_has_none():
     # Rounding of sums over 208 nodes of entries of order 1: 1e-12 of the largest entry.
     assert np.abs(z.reshape(-1, 3).sum(axis=0)).max() <= 1e-12 * np.abs(z).max()
     assert np.abs(unprojected.reshape(-1, 3).sum(axis=0)).max() > 1e-3 * np.abs(unprojected).max()
+
+
+def test_the_study_runs_each_weight_and_puts_the_default_back(monkeypatch, capsys):
+    """benchmarks/study_stand_in.py at a tiny size: a row per rung and nu with a column per weight, and the module's
+    weight as it was afterwards (each run sets its own)."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "study_stand_in.py"
+    spec = importlib.util.spec_from_file_location("study_stand_in", path)
+    study = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, spec.name, study)
+    spec.loader.exec_module(study)
+    default = amg.STAND_IN_CORRECTION
+    seen = []
+    original = study.iterations
+
+    def logged(rung, nu, weight, **options):
+        seen.append((rung, nu, weight))
+        return original(rung, nu, weight, **options)
+
+    monkeypatch.setattr(study, "iterations", logged)
+    study.main(["--rungs", "smoothed", "--nu", "0.3", "0.45", "--weights", "0", "0.3", "--cells", "4", "1", "1",
+                "--steps", "3"])
+    assert seen == [("smoothed", nu, weight) for nu in (0.3, 0.45) for weight in (0.0, 0.3)]
+    assert amg.STAND_IN_CORRECTION == default
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("smoothed")]
+    assert len(rows) == 2 and all(row.count("(") == 2 for row in rows)
+    study.main(["--build-cost", "--cells", "4", "1", "1"])
+    assert "one V-cycle" in capsys.readouterr().out
