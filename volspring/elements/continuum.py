@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from volspring.elements.base import BlockMap, ElementSet, Linearization, OperatorLinearization
-from volspring.elements.tet_kinematics import (SmoothingDomains, TetGradients, corotated, corotational,
+from volspring.elements.tet_kinematics import (_UPPER, SmoothingDomains, TetGradients, corotated, corotational,
                                               merged_pairs, pair_nodes, sparse_layout, twist_directions, twist_rows)
 from volspring.material import _real_array, _real_number
 from volspring.kernels import compiled, unsigned
@@ -267,7 +267,7 @@ class CorotatedTets(_TetContinuum):
         less sum_r sign_r (rows_r a)(rows_r a)^T of each tet corner a, summed over each node's tets."""
         R = np.ascontiguousarray(np.reshape(rows, (-1, 3, 4, 3)).transpose(1, 3, 0, 2))  # (r, i, T, a)
         S = R * signs.T[:, None, :, None]
-        twist = [(S[0, i] * R[0, j] + S[1, i] * R[1, j]) + S[2, i] * R[2, j] for i, j in _UPPER_ENTRIES]
+        twist = [(S[0, i] * R[0, j] + S[1, i] * R[1, j]) + S[2, i] * R[2, j] for i, j in _UPPER]
         return self._scalar_part.diagonal()[:, None, None] * np.eye(3) - \
             _node_sums(self.kinematics.tets.ravel(), [entry.ravel() for entry in twist], self.node_count)
 
@@ -735,10 +735,10 @@ class NodalStrain(_TetContinuum):
         (dv_d/dx_a)(dv_d/dx_a)^T and 2 mu_d V_d ((gbar_a . gbar_a) I - sum_r c_r (q_r gbar_a)(q_r gbar_a)^T)."""
         domains = self.domains
         domain, V = domains.ring_domain, domains.volumes
-        entries = [np.zeros(len(domain)) for _ in _UPPER_ENTRIES]  # entry (i, j) of every ring entry's block
+        entries = [np.zeros(len(domain)) for _ in _UPPER]  # entry (i, j) of every ring entry's block
         if "J" in state:
             w = np.ascontiguousarray((self._ring_volume_gradients(state) * np.sqrt(self.bulk / V)[domain][:, None]).T)
-            for entry, (i, j) in zip(entries, _UPPER_ENTRIES):
+            for entry, (i, j) in zip(entries, _UPPER):
                 entry += w[i] * w[j]
         if "P" in state:
             if "twist_entries" not in state:
@@ -749,7 +749,7 @@ class NodalStrain(_TetContinuum):
             scaled = state["coefficients"][domain].T[:, None, :] * plain
             weight = (2.0 * self.shear * V)[domain]
             dots = (g[0] * g[0] + g[1] * g[1]) + g[2] * g[2]
-            for entry, (i, j) in zip(entries, _UPPER_ENTRIES):
+            for entry, (i, j) in zip(entries, _UPPER):
                 twist = (scaled[0, i] * plain[0, j] + scaled[1, i] * plain[1, j]) + scaled[2, i] * plain[2, j]
                 entry += weight * ((dots if i == j else 0.0) - twist)
         return _node_sums(domains.ring_node, entries, self.node_count)
@@ -875,14 +875,11 @@ class NodalStrain(_TetContinuum):
                 f"b={self.stiffness_damping:g} s)")
 
 
-_UPPER_ENTRIES = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))  # a symmetric 3x3 matrix's upper triangle
-
-
 def _node_sums(nodes, entries, node_count) -> np.ndarray:
     """(node_count, 3, 3) -- e symmetric blocks summed by their ``nodes`` (e,), from their upper triangles' entries
-    (six (e,) arrays in :data:`_UPPER_ENTRIES`' order)."""
+    (six (e,) arrays in the order of :data:`volspring.elements.tet_kinematics._UPPER`)."""
     sums = np.empty((node_count, 3, 3))
-    for entry, (i, j) in zip(entries, _UPPER_ENTRIES):
+    for entry, (i, j) in zip(entries, _UPPER):
         sums[:, i, j] = sums[:, j, i] = np.bincount(nodes, weights=entry, minlength=node_count)
     return sums
 
