@@ -46,7 +46,11 @@ Run (the references take ~25 min at --level 1 on 2 cores; --cache keeps them bet
         --shapes torus_gravity capsule_gravity l_bracket_gravity --skip-model --skip-modes
 
 ``--size-factor f`` meshes the shapes with a recipe (all but the bunny) anew at f times their element size
-(``validation.heldout.MESH_RECIPES``), to see how the candidates move with the resolution.
+(``validation.heldout.MESH_RECIPES``), to see how the candidates move with the resolution; ``--best-alpha B``
+prints instead the alpha each shape asks for with the volume variation term at B mu (:func:`best_alphas`)::
+
+    OMP_NUM_THREADS=1 python benchmarks/study_locking.py --level 0 --nu 0.3 0.45 0.49 0.499 --best-alpha 2.5 \
+        --size-factor 0.85 --shapes torus_gravity capsule_gravity l_bracket_gravity
 
 This is a study script, not a test.
 """
@@ -489,12 +493,18 @@ def main():
     parser.add_argument("--skip-modes", action="store_true")
     parser.add_argument("--size-factor", type=float, default=1.0,
                         help="remake the shapes with a mesh recipe at this times their element size (not the bunny)")
+    parser.add_argument("--best-alpha", type=float, default=None, metavar="B",
+                        help="only print, per shape, the alpha at which the rung with the volume variation term "
+                             "of weight B (B mu) meets the reference on average over --nu up to 0.49")
     args = parser.parse_args()
     nus = list(args.nu)
     if 0.45 not in nus or 0.499 not in nus:
         parser.error("--nu must hold 0.45 and 0.499 (the drift)")
     references = heldout_references(args.shapes, nus, args.level, args.cache, args.refined_p2,
                                     size_factor=args.size_factor)
+    if args.best_alpha is not None:
+        best_alphas(args, references)
+        return
     specs = candidates()
     head = f"{'':34s}" + "".join(f"{nu:8.3f}" for nu in nus) + "   drift  maxerr(0.25-0.49)"
     candidate_rows = {}
@@ -540,6 +550,43 @@ def main():
         print(f"{label:34s}  drift {drift:6.2f}%  error {error:6.2f}%")
     if not args.skip_modes:
         modes_table(specs)
+
+
+def best_alphas(args, references, alphas=np.arange(0.45, 0.901, 0.025)):
+    """``--best-alpha B``: per shape, the alpha (interpolated between ``alphas``) at which the rung with the volume
+    variation term of weight B has a mean displacement ratio of 1 over the Poisson ratios up to 0.49, and how far
+    the ratios at that alpha spread over them. Stop 43, against same-mesh Taylor-Hood (``--level 0``), B 2.5, at
+    --size-factor 0.6 / 0.7 / 0.85 / 1 / 1.25: torus 0.60 / 0.61 / 0.65 / 0.75 / 0.77, capsule 0.56 / 0.60 / 0.57 /
+    0.74 / 0.79, L-bracket 0.60 / 0.59 / 0.64 / 0.72 / 0.67, bunny (1 only) 0.75; spread at most 3.7%."""
+    from validation.springs import held_nodes
+
+    nus = [nu for nu in args.nu if nu <= 0.49]
+    for name in args.shapes:
+        stored = name if args.size_factor == 1.0 else f"{name}@{args.size_factor:g}"
+        operators, ratios = None, np.zeros((len(alphas), len(nus)))
+        for j, nu in enumerate(nus):
+            case = heldout_case(name, nu, args.size_factor)
+            operators = operators or SmoothedOperators(case.mesh)
+            held = held_nodes(case)
+            reference = references[(stored, args.level, nu, "TH")]
+            k = int(np.argmax(np.linalg.norm(reference, axis=1)))
+            direction = reference[k] / np.linalg.norm(reference[k])
+            for i, alpha in enumerate(alphas):
+                spec = {"shear": [("tet", 1 - alpha), ("node", alpha)], "volume": "free pairs", "pair_bulk_cap": 20,
+                        "volume_variation": args.best_alpha}
+                u = linear_static(candidate_stiffness(spec, operators, case.material, held), operators,
+                                  case.material.density, case.gravity, held)
+                ratios[i, j] = u[k] @ direction / (reference[k] @ direction)
+        mean = ratios.mean(axis=1)
+        crossing = np.flatnonzero(np.diff(np.sign(mean - 1)))
+        if not len(crossing):
+            print(f"{stored}: the mean ratio does not cross 1 for alpha {alphas[0]:.3f}-{alphas[-1]:.3f}")
+            continue
+        i = crossing[0]
+        best = alphas[i] + (1 - mean[i]) * (alphas[i + 1] - alphas[i]) / (mean[i + 1] - mean[i])
+        spread = np.interp(best, alphas, ratios.max(axis=1) - ratios.min(axis=1))
+        print(f"{stored} ({operators.n} nodes): best alpha {best:.3f} with the term at {args.best_alpha:g} mu; "
+              f"the ratios over nu {', '.join(f'{nu:g}' for nu in nus)} spread by {100 * spread:.1f}% there")
 
 
 def modes_table(specs, count=3, nus=(0.3, 0.49, 0.499)):
