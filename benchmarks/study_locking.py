@@ -460,7 +460,7 @@ def candidates():
     # Stop 43: the linear part of the volume change over each node's tets, at most 2.5 mu (see the module docstring).
     # Against same-mesh Taylor-Hood it brings the four shapes within 2.1% at alpha 0.74, and the 0.7x meshes
     # (--size-factor 0.7) within 0.6% at alpha 0.6: each resolution asks for its own alpha.
-    for a in (0.6, 0.65, 0.75):
+    for a in (0.6, 0.65, 0.74, 0.75):
         specs[f"a={a:g}, rung + vol variation 2.5 mu"] = {"shear": [("tet", 1 - a), ("node", a)],
                                                          "volume": "free pairs", "pair_bulk_cap": 20,
                                                          "volume_variation": 2.5}
