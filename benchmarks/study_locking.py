@@ -284,8 +284,7 @@ class SmoothedOperators:
         shear = sum(c * (B.T @ W @ B) for B, c in strains)
         trace = strains[0][0] + strains[1][0] + strains[2][0]
         volume = trace.T @ W @ trace
-        order = np.arange(3 * self.n).reshape(3, self.n).T.ravel()  # node-major index -> component-major
-        result = (shear[order][:, order].tocsr(), volume[order][:, order].tocsr())
+        result = (node_major(shear), node_major(volume))
         if key is not None:
             self._cache[key] = result
         return result
@@ -306,8 +305,7 @@ class SmoothedOperators:
         shares, Vd = shares[Vd > 0], Vd[Vd > 0]
         trace = sp.hstack([(sp.diags(1 / Vd) @ shares @ G).tocsr() for G in self.gradient]).tocsr()
         volume = trace.T @ sp.diags(Vd) @ trace
-        order = np.arange(3 * n).reshape(3, n).T.ravel()  # node-major index -> component-major
-        return volume[order][:, order].tocsr()
+        return node_major(volume)
 
     def volume_variation(self):
         """(3n, 3n) node-major: u^T K u = sum over nodes i and their tets t (weight w = V_t / 4) of w (g_i . (c_t -
@@ -334,8 +332,7 @@ class SmoothedOperators:
         rows = (3 * nodes[:, None] + np.arange(3)).ravel()
         slopes = sp.csr_matrix((values.ravel(), (rows, np.repeat(tet, 3))), shape=(3 * n, T))
         divergence = (slopes @ sp.hstack(self.gradient).tocsr()).tocsr()  # u component-major
-        order = np.arange(3 * n).reshape(3, n).T.ravel()
-        result = (divergence.T @ divergence)[order][:, order].tocsr()
+        result = node_major(divergence.T @ divergence)
         self._cache["variation"] = result
         return result
 
@@ -353,8 +350,7 @@ class SmoothedOperators:
         deviation = (sp.identity(T, format="csr") - corners @ averaging).tocsr()
         W = sp.diags(self.volumes)
         K = sum(c * ((deviation @ B).T @ W @ (deviation @ B)) for B, c in strain_rows(self.gradient))
-        order = np.arange(3 * n).reshape(3, n).T.ravel()
-        result = K[order][:, order].tocsr()
+        result = node_major(K)
         self._cache["corner"] = result
         return result
 
@@ -362,6 +358,14 @@ class SmoothedOperators:
         """(3n,) -- density x a quarter of each tet's volume per corner, per component (the rung's masses)."""
         m = np.bincount(self.mesh.tets.ravel(), weights=np.repeat(density * self.volumes / 4, 4), minlength=self.n)
         return np.repeat(m, 3)
+
+
+def node_major(K):
+    """The (3n, 3n) matrix ``K`` of component-major unknowns (all x, then all y, then all z) in node-major order
+    (x, y, z of node 0, then of node 1, ...), as CSR."""
+    n = K.shape[0] // 3
+    order = np.arange(3 * n).reshape(3, n).T.ravel()  # node-major index -> component-major
+    return sp.csr_matrix(K)[order][:, order].tocsr()
 
 
 def strain_rows(gradients):
