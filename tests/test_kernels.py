@@ -378,6 +378,48 @@ def test_the_system_product_is_scipys_bit_for_bit(columns):
 
 
 @needs_numba
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("blocksize", [3, 2])
+def test_the_point_wise_triangles_are_numpys_entry_for_entry(dtype, blocksize):
+    """The finest level's triangles (a build makes them from the system matrix): the same row pointers, columns,
+    index types, values (cast) and diagonal, with and without the kernels; the diagonal blocks' entries on the other
+    side of the diagonal stored as zeros on both."""
+    import scipy.sparse as sp
+
+    from volspring.solvers.amg import _Triangles
+
+    rng = np.random.default_rng(3)
+    matrix = random_bsr(rng, 40, 40, (blocksize, blocksize), 0.15)
+    matrix = sp.bsr_matrix(matrix + sp.eye(40 * blocksize), blocksize=(blocksize, blocksize))  # every diagonal block
+    matrix.sort_indices()
+
+    def triangles():
+        made = _Triangles(matrix, point_wise=True, dtype=dtype)
+        arrays = [array for half in (made.lower, made.upper) for array in (half.indptr, half.indices, half.data)]
+        return arrays + [made.diagonal]
+
+    numpy_arrays, kernel_arrays = under_both(triangles)
+    for reference, result in zip(numpy_arrays, kernel_arrays, strict=True):
+        assert reference.dtype == result.dtype and reference.shape == result.shape
+        assert np.array_equal(reference.view(np.uint8), result.view(np.uint8))
+    assert np.count_nonzero(numpy_arrays[2] == 0) >= 40 * blocksize * (blocksize - 1) // 2  # the cleared entries
+
+
+@needs_numba
+def test_triangles_without_a_diagonal_block_are_refused_as_numpy_refuses_them():
+    import scipy.sparse as sp
+
+    from volspring.solvers.amg import _Triangles
+
+    matrix = sp.bsr_matrix(np.kron(np.array([[1.0, 1.0], [1.0, 0.0]]), np.ones((3, 3))), blocksize=(3, 3))
+    matrix.eliminate_zeros()
+    for choice in ("numpy", "numba"):
+        kernels.select(choice)
+        with pytest.raises(ValueError, match="every block row needs its diagonal block"):
+            _Triangles(matrix, point_wise=True)
+
+
+@needs_numba
 def test_the_multigrid_hierarchy_is_the_same_bit_for_bit():
     """Every level's matrix, prolongation and restriction of one build (a coarsest level of 60 unknowns makes three
     levels: products with 3 x 3 and 6 x 6 blocks)."""

@@ -14,9 +14,9 @@ import numba
 import numpy as np
 
 __all__ = ["block_product", "block_product_rows", "block_times", "cofactor", "corotated_parts", "corotated_times",
-           "csr_times", "finest_down", "finest_up", "gathered", "gram_entries", "jacobi_eigh", "nodal_shear_times",
-           "polar_fast", "spread", "spring_block_sum", "spring_linearization", "spring_stiffness_times",
-           "twist_directions", "twist_rows", "volume_gradients"]
+           "csr_times", "diagonal_blocks", "finest_down", "finest_up", "gathered", "gram_entries", "jacobi_eigh",
+           "nodal_shear_times", "point_triangles", "polar_fast", "spread", "spring_block_sum", "spring_linearization",
+           "spring_stiffness_times", "twist_directions", "twist_rows", "volume_gradients"]
 
 def _jit(function):
     """``function`` compiled, cached on disk where numba finds a writable place (beside this file, else the user's
@@ -278,6 +278,51 @@ def finest_up(lower_indptr, lower_indices, lower_data, upper_indptr, upper_indic
         right[i] = r[i] - (_row_sum(lower_indptr, lower_indices, lower_data, z, i, zero) - diagonal[i] * z[i])
     for i in range(n - 1, -1, -1):
         _gauss_seidel_row(upper_indptr, upper_indices, upper_data, z, right[i], i, zero)
+
+
+@_jit
+def diagonal_blocks(indptr, indices, out):  # pragma: no cover (compiled; the fast tests compare with numpy)
+    """``out[row]`` = the entry of block row ``row``'s diagonal block in a BSR matrix with sorted block columns, -1
+    where the row has none (:func:`point_triangles` needs every one)."""
+    for row in range(indptr.shape[0] - 1):
+        out[row] = -1
+        for entry in range(indptr[row], indptr[row + 1]):
+            if indices[entry] == row:
+                out[row] = entry
+                break
+
+
+@_jit
+def point_triangles(indptr, indices, data, diagonal, lower_indptr, lower_indices, lower_data, upper_indptr,
+                    upper_indices, upper_data, entries):  # pragma: no cover (compiled; the fast tests compare)
+    """The point-wise lower and upper triangles of a BSR matrix of square blocks with sorted block columns
+    (``data`` (nnzb, B, B), ``diagonal`` from :func:`diagonal_blocks`) as CSR arrays in the outputs' types: every
+    block on and left (right) of the diagonal whole, in scipy's ``bsr_tocsr`` order, its diagonal block's entries
+    on the other side of the diagonal stored as zeros; and the matrix's diagonal ``entries``. What numpy makes of
+    the matrix in several passes and two block copies (:class:`volspring.solvers.amg._Triangles`), entry for entry:
+    the values are only cast."""
+    size = data.shape[1]
+    zero = lower_data.dtype.type(0.0)
+    low = up = 0
+    lower_indptr[0] = upper_indptr[0] = 0
+    for row in range(indptr.shape[0] - 1):
+        middle = diagonal[row]
+        for i in range(size):
+            for entry in range(indptr[row], middle + 1):
+                first = size * indices[entry]
+                for j in range(size):
+                    lower_indices[low] = first + j
+                    lower_data[low] = zero if entry == middle and j > i else data[entry, i, j]
+                    low += 1
+            for entry in range(middle, indptr[row + 1]):
+                first = size * indices[entry]
+                for j in range(size):
+                    upper_indices[up] = first + j
+                    upper_data[up] = zero if entry == middle and j < i else data[entry, i, j]
+                    up += 1
+            lower_indptr[size * row + i + 1] = low
+            upper_indptr[size * row + i + 1] = up
+            entries[size * row + i] = data[middle, i, i]
 
 
 @_jit

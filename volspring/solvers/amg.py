@@ -357,13 +357,17 @@ class _Triangles:
         self.dtype = np.dtype(matrix.dtype if dtype is None else dtype)
         blocked = matrix.format == "bsr"
         size = matrix.blocksize[0] if blocked else 1
-        halves = []
-        for keep, half in _halves(matrix, self.dtype):
-            # One half at a time, its block form dropped at once: they are made after a build, at its peak memory.
-            halves.append(_scalar_triangle(half, keep) if blocked and point_wise else half)
-            del half
-        lower, upper = halves
-        del halves
+        made = _compiled_point_triangles(matrix, self.dtype) if blocked and point_wise else None
+        if made is None:
+            halves = []
+            for keep, half in _halves(matrix, self.dtype):
+                # One half at a time, its block form dropped at once: they are made after a build, at its peak memory.
+                halves.append(_scalar_triangle(half, keep) if blocked and point_wise else half)
+                del half
+            made = (*halves, None)
+            del halves
+        lower, upper, diagonal = made
+        del made
         self.blocksize = (size, size) if blocked else None
         self.inverse = None
         if blocked and not point_wise:
@@ -372,7 +376,9 @@ class _Triangles:
             self.inverse = get_block_diag(matrix, blocksize=size, inv_flag=True).astype(self.dtype, copy=False)
         self.lower, self.upper = lower, upper
         self.format = lower.format
-        self.diagonal = _block_diagonal(lower, size) if self.inverse is not None else lower.diagonal()
+        if diagonal is None:
+            diagonal = _block_diagonal(lower, size) if self.inverse is not None else lower.diagonal()
+        self.diagonal = diagonal
 
     def _diagonal_times(self, x: np.ndarray) -> np.ndarray:
         if self.inverse is None:
@@ -539,6 +545,35 @@ def _scalar_triangle(blocks: sp.bsr_matrix, keep: str) -> sp.csr_matrix:
     positions = scalar.indptr[rows + 1] - size + column if keep == "lower" else scalar.indptr[rows] + column
     scalar.data[positions.ravel()] = 0.0
     return scalar
+
+
+def _compiled_point_triangles(blocks: sp.bsr_matrix,
+                              dtype) -> tuple[sp.csr_matrix, sp.csr_matrix, np.ndarray] | None:
+    """The point-wise triangles of a BSR matrix of square blocks with sorted block columns, in ``dtype``, as
+    :func:`_halves` and :func:`_scalar_triangle` make them, and the lower one's diagonal, entry for entry, by one
+    compiled pass (:func:`volspring._compiled.point_triangles`) where the kernels run (else None)."""
+    kernels = compiled()
+    if kernels is None or blocks.blocksize[0] != blocks.blocksize[1]:
+        return None
+    size, count = blocks.blocksize[0], blocks.shape[0] // blocks.blocksize[0]
+    indptr, indices = unsigned(blocks.indptr), unsigned(blocks.indices)
+    diagonal = np.empty(count, dtype=np.int64)
+    kernels.diagonal_blocks(indptr, indices, diagonal)
+    if (diagonal < 0).any():
+        raise ValueError("every block row needs its diagonal block for Gauss-Seidel")
+    below = int((diagonal - blocks.indptr[:-1]).sum()) + count  # blocks on and left of the diagonal
+    above = blocks.indptr[-1] - below + count
+    index_type = np.int32 if max(blocks.nnz, blocks.shape[0]) <= np.iinfo(np.int32).max else np.int64  # tocsr's
+    halves = []
+    for stored in (below, above):
+        halves.append((np.empty(size * size * stored, dtype=dtype), np.empty(size * size * stored, dtype=index_type),
+                       np.empty(blocks.shape[0] + 1, dtype=index_type)))
+    (lower_data, lower_indices, lower_indptr), (upper_data, upper_indices, upper_indptr) = halves
+    entries = np.empty(blocks.shape[0], dtype=dtype)
+    kernels.point_triangles(indptr, indices, blocks.data, diagonal, unsigned(lower_indptr), unsigned(lower_indices),
+                            lower_data, unsigned(upper_indptr), unsigned(upper_indices), upper_data, entries)
+    lower, upper = (sp.csr_matrix(half, shape=blocks.shape) for half in halves)
+    return lower, upper, entries
 
 
 def _block_diagonal(matrix: sp.bsr_matrix, size: int) -> np.ndarray:
