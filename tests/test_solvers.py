@@ -135,6 +135,23 @@ def test_a_banded_coarsest_level_is_factorised_in_its_own_order_and_a_shuffled_o
     assert spla.splu(shuffled, permc_spec="NATURAL").L.nnz > coarse.LU.L.nnz
 
 
+def test_a_blocked_coarsest_level_is_factorised_as_its_scalar_form():
+    """The coarsest level comes as BSR and is taken to CSC through its transpose (cheaper than scipy's way through
+    CSR): the same factors, so the same solution bit for bit as from its CSC form, on a matrix that is not symmetric
+    (where the transpose would be the wrong matrix) and has an empty row and column (left out of the factorisation)."""
+    rng = np.random.default_rng(4)
+    dense = rng.standard_normal((12, 12)) + 12 * np.eye(12)
+    dense[5, :] = dense[:, 5] = 0.0
+    blocked = sp.bsr_matrix(dense, blocksize=(3, 3))
+    b = rng.standard_normal(12)
+    x = amg._CoarseLU(blocked).solve(b)
+    assert x.tobytes() == amg._CoarseLU(sp.csc_matrix(dense)).solve(b).tobytes()
+    kept = np.arange(12) != 5
+    # Rounding: a diagonally dominant 11 x 11 system solved by LU (condition number about 2), far above 1e-16.
+    np.testing.assert_allclose(dense[np.ix_(kept, kept)] @ x[kept], b[kept], atol=1e-12)
+    assert x[5] == 0.0
+
+
 def test_a_singular_coarsest_level_falls_back_to_the_pseudo_inverse(system):
     """Where SuperLU finds the coarsest matrix singular (statics of a barely held body), the level is solved by
     pyamg's pseudo-inverse instead, and the cycle stays finite. Here two of its rows and columns are made equal, so
