@@ -5,7 +5,8 @@ forces, Jacobian blocks and stiffness product, which numpy does as several passe
 springs' size (gathers, lengths, outer products, scatters), each with its own temporary; the upper
 rungs of the ladder add the polar decomposition of every tet's and node's deformation gradient,
 whose Jacobi rotations numpy does as dozens of vector operations a sweep; an AMG build spends
-three quarters of its time in scipy's block sparse products, whose loops do not know the block sizes;
+three quarters of its time in scipy's block sparse products, whose loops do not know the block sizes,
+and splits the finest level into point-wise triangles in several passes and copies;
 and the solve spends its time in scipy's products with the 3x3-block system and in the multigrid
 cycle's finest level, a dozen Python calls and temporaries around each of its sweeps.
 With numba installed (``pip install 'volspring[fast]'``) the same arithmetic runs in compiled loops
