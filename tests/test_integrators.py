@@ -325,3 +325,19 @@ def test_advance_leaves_its_input_state_alone():
         make_integrator(name).step(scene, state, 1e-5)
     assert np.array_equal(state.x, frozen[0]) and np.array_equal(state.v, frozen[1])
     assert all(np.array_equal(state.memory[k], frozen[2][k]) for k in frozen[2])
+
+
+@pytest.mark.parametrize("where, expected", [(("v", 7), 7), (("x", 3), 3), (("x", 9), 9)])
+def test_a_non_finite_state_is_refused_naming_its_first_bad_node(where, expected):
+    """check_finite, after every step: NaN or Inf in a position or a velocity raises SimulationDiverged naming the
+    first node that holds one; a finite state passes."""
+    from volspring.integrators.base import check_finite
+
+    x, v = np.zeros((12, 3)), np.ones((12, 3))
+    check_finite(State(x.copy(), v.copy(), 0.5, 5), 0.01)
+    array, node = where
+    (x if array == "x" else v)[node, 1] = np.nan if node != 9 else np.inf
+    v[10, 2] = np.inf  # a later bad node is not the one named
+    with pytest.raises(SimulationDiverged, match=f"worst node {expected}") as caught:
+        check_finite(State(x, v, 0.5, 5), 0.01)
+    assert caught.value.node == expected and caught.value.step == 5

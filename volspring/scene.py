@@ -297,6 +297,11 @@ class Scene:
         """Whether every external force has a potential (the model's element sets all have one)."""
         return all(isinstance(force, HasPotential) for force in self.forces)
 
+    @cached_property
+    def _jacobian_forces(self) -> tuple:
+        """The external forces with a Jacobian, found once (a runtime protocol check costs 6 us a force and step)."""
+        return tuple(force for force in self.forces if isinstance(force, HasJacobian))
+
     def external_forces(self, x: np.ndarray, v: np.ndarray, t: float, out: np.ndarray | None = None, *,
                         conservative: bool | None = None) -> np.ndarray:
         """(n, 3) float -- the external forces on every node [N], added into ``out`` when given.
@@ -322,9 +327,7 @@ class Scene:
         (:class:`volspring.assembly.BlockPattern`).
         """
         dfdx = dfdv = None
-        for force in self.forces:
-            if not isinstance(force, HasJacobian):
-                continue
+        for force in self._jacobian_forces:
             jx, jv = force.jacobian(self.model, x, v, t)
             if jx is not None:
                 dfdx = jx if dfdx is None else dfdx + jx
