@@ -133,14 +133,19 @@ def test_the_direct_solver_and_exact_curvature_assemble_everything():
     assert ImplicitEuler().matrix_free
 
 
-def test_a_step_whose_sets_are_all_products_multiplies_only_the_diagonal_blocks(bar, monkeypatch):
+@pytest.mark.parametrize("supports", ["held in part", "pinned"])
+def test_a_step_whose_sets_are_all_products_multiplies_only_the_diagonal_blocks(bar, supports, monkeypatch):
     """Where no set is assembled (the smoothed rung) the step's matrix is the masses amid the stand-in's 1-ring of
     zero blocks: CG and its guess multiply the diagonal blocks alone, and every bit of the run stays what it was
-    with the whole pattern (partly held nodes included, whose elimination edits the diagonal blocks)."""
+    with the whole pattern: with partly held nodes, whose elimination edits the diagonal blocks of the whole
+    pattern's matrix, and with pinned nodes alone, where the diagonal blocks are made without the pattern."""
+    from types import SimpleNamespace
+
     from volspring.solvers import AMGConjugateGradient
 
     mesh, model = bar
-    scene = _held_in_part(mesh, model)
+    scene = _held_in_part(mesh, model) if supports == "held in part" else \
+        Scene(model, forces=[Gravity()], pins=Pins(np.flatnonzero(mesh.points[:, 0] == 0.0)))
     solve, blocks = AMGConjugateGradient.solve, []
 
     def recording(self, matrix, *args, **kwargs):
@@ -160,6 +165,9 @@ def test_a_step_whose_sets_are_all_products_multiplies_only_the_diagonal_blocks(
     assert pattern.assembles == (model.rung != "smoothed")
     assert blocks == [expected] * 5, (blocks, pattern.free_count, pattern.block_count)
     monkeypatch.setattr(BlockPattern, "diagonal_part", lambda self, matrix: matrix)
+    # The whole pattern's matrix, its blocks zero but the diagonal's (no linearisation: no set adds blocks).
+    monkeypatch.setattr(BlockPattern, "diagonal_matrix",
+                        lambda self, diagonal: self.matrix(SimpleNamespace(parts=(None,) * len(self.parts)), diagonal))
     _, whole = run()
     for name in ("x", "v"):
         assert np.array_equal(getattr(compact, name), getattr(whole, name)), name

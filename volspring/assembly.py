@@ -238,9 +238,21 @@ class BlockPattern:
 
     def diagonal_part(self, matrix: sp.bsr_matrix) -> sp.bsr_matrix:
         """(3f, 3f) BSR -- the diagonal blocks of a matrix on this pattern alone, a copy (one block per row)."""
+        return self._diagonal_only(np.ascontiguousarray(matrix.data[self.diagonal_blocks]))
+
+    def diagonal_matrix(self, diagonal: np.ndarray) -> sp.bsr_matrix:
+        """(3f, 3f) BSR -- ``diagonal`` (as :meth:`data` takes it) alone, one block per row: the bits of
+        :meth:`diagonal_part` of :meth:`matrix` where no set is assembled (:attr:`assembles`), without making the
+        pattern's blocks of zeros first (3 MB a step on the README beam's smoothed rung: 0.27 against 0.02 ms)."""
         f = self.free_count
-        diagonal = np.ascontiguousarray(matrix.data[self.diagonal_blocks])
-        return sp.bsr_matrix((diagonal, np.arange(f, dtype=np.int32), np.arange(f + 1, dtype=np.int32)),
+        data = np.zeros((f, 3, 3))
+        blocks = np.arange(f)
+        _add_diagonal(data, diagonal, blocks, (9 * blocks[:, None] + np.array([0, 4, 8])).ravel())
+        return self._diagonal_only(data)
+
+    def _diagonal_only(self, blocks: np.ndarray) -> sp.bsr_matrix:
+        f = self.free_count
+        return sp.bsr_matrix((blocks, np.arange(f, dtype=np.int32), np.arange(f + 1, dtype=np.int32)),
                              shape=(self.size, self.size), copy=False)
 
     def _reorder(self):
@@ -363,14 +375,7 @@ class BlockPattern:
             data += product
         data = data.reshape(-1, 3, 3)
         if diagonal is not None:
-            diagonal = np.asarray(diagonal, dtype=np.float64)
-            if diagonal.ndim == 3:
-                data[self.diagonal_blocks] += diagonal
-            else:
-                flat = data.reshape(-1)
-                if diagonal.ndim == 1:
-                    diagonal = np.repeat(diagonal, 3)
-                flat[self.diagonal_entries] += diagonal.ravel()
+            _add_diagonal(data, diagonal, self.diagonal_blocks, self.diagonal_entries)
         if out is not None:
             out[...] = data
             return out
@@ -516,6 +521,19 @@ def held_unknowns(pattern: BlockPattern, held: np.ndarray) -> np.ndarray:
     """(3f,) bool -- which free unknowns of ``pattern`` a support holds (``held``: (n, 3) bool, as
     :attr:`volspring.Scene.held`); all False when only whole nodes are held."""
     return np.ascontiguousarray(held[pattern.free_nodes]).ravel()
+
+
+def _add_diagonal(data: np.ndarray, diagonal, blocks: np.ndarray, entries: np.ndarray) -> None:
+    """Add ``diagonal`` ((f,) a scalar times I, (f, 3) a diagonal or (f, 3, 3) a block per free node) to the
+    diagonal blocks of ``data`` (nnzb, 3, 3), in place: at block ``blocks[i]``, flat entries ``entries``."""
+    diagonal = np.asarray(diagonal, dtype=np.float64)
+    if diagonal.ndim == 3:
+        data[blocks] += diagonal
+    else:
+        flat = data.reshape(-1)
+        if diagonal.ndim == 1:
+            diagonal = np.repeat(diagonal, 3)
+        flat[entries] += diagonal.ravel()
 
 
 def eliminate_held(pattern: BlockPattern, matrix: sparse.spmatrix, held: np.ndarray, *,
