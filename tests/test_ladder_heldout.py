@@ -46,7 +46,7 @@ def test_smoothed_rung_tracks_the_reference_where_springs_do_not(name, nu):
 
 @pytest.mark.xfail(strict=True, reason="issue 11's deflection goal is not met: the capsule reads 1.045 of the "
                    "reference at nu 0.3 and the torus 0.968 at 0.49, and no single alpha brings both within 3% "
-                   "(README, 'The default alpha'). When this passes, make it a plain test")
+                   "(docs/ladder-studies.md, 'The default alpha'). When this passes, make it a plain test")
 def test_smoothed_rung_meets_the_deflection_goal_on_every_held_out_shape():
     """The issue's goal itself, beside the regression floor above: within 3% of the reference on every shape."""
     misses = {(name, nu): _ratios(name, nu)["smoothed"] - 1 for name in HELDOUT_CASE_NAMES for nu in (0.3, 0.49)}
